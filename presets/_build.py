@@ -1,0 +1,99 @@
+"""Small geometry and scene-writing helpers shared by the presets (no large binaries are committed:
+every preset writes its meshes and textures from code)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def rectangle(width: float, height: float, nx: int = 1, ny: int = 1):
+    """A rectangle in the local xy plane, centred, normal +z: (vertices (v, 3), faces (f, 3), uv (v, 2))."""
+    u, v = np.meshgrid(np.linspace(0, 1, nx + 1), np.linspace(0, 1, ny + 1), indexing="xy")
+    verts = np.stack([(u - 0.5) * width, (v - 0.5) * height, np.zeros_like(u)], axis=-1).reshape(-1, 3)
+    uv = np.stack([u, v], axis=-1).reshape(-1, 2)
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return verts, faces, uv
+
+
+def disk(radius: float, segments: int = 128):
+    """A disk in the local xy plane, centred, normal +z: (vertices, faces)."""
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    verts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([radius * np.cos(ang), radius * np.sin(ang),
+                                                         np.zeros(segments)], 1)])
+    k = np.arange(segments)
+    faces = np.stack([np.zeros(segments, int), 1 + k, 1 + (k + 1) % segments], 1)
+    return verts, faces
+
+
+def box(size_x: float, size_y: float, size_z: float):
+    """A closed box centred at the origin with outward normals: (vertices, faces)."""
+    import trimesh
+
+    m = trimesh.creation.box(extents=[size_x, size_y, size_z])
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def sphere(radius: float, subdivisions: int = 4, inward: bool = False):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    f = np.asarray(m.faces)
+    return np.asarray(m.vertices), (f[:, ::-1] if inward else f)
+
+
+def frame_matrix(origin, x_axis, normal) -> list[list[float]]:
+    """4 x 4 matrix placing local (x, y, z) at ``origin`` with local x along ``x_axis`` and local z
+    along ``normal`` (y completes a right-handed frame)."""
+    z = np.asarray(normal, float)
+    z /= np.linalg.norm(z)
+    x = np.asarray(x_axis, float)
+    x = x - (x @ z) * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, origin
+    return m.tolist()
+
+
+def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None):
+    """Write a triangle mesh as Wavefront OBJ (with per-vertex texture coordinates if given)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    if uv is not None:
+        lines += [f"vt {s:.9g} {t:.9g}" for s, t in uv]
+        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in faces]
+    else:
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+class SceneBuilder:
+    """Collects objects and writes a scene folder (scene.json, meshes/, textures/)."""
+
+    def __init__(self, folder: Path, name: str, description: str):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.data = {"format": "hud-scene", "version": 1, "name": name, "description": description,
+                     "environment": {"type": "none"}, "objects": []}
+
+    def add(self, name: str, mesh, material: dict, transform: list | None = None, smooth: bool = False,
+            uv: np.ndarray | None = None):
+        vertices, faces = mesh[0], mesh[1]
+        rel = f"meshes/{name}.obj"
+        write_obj(self.folder / rel, np.asarray(vertices), np.asarray(faces), uv)
+        obj = {"name": name, "mesh": rel, "material": material}
+        if transform is not None:
+            obj["transform"] = {"matrix": transform}
+        if smooth:
+            obj["smooth_normals"] = True
+        self.data["objects"].append(obj)
+
+    def write(self, **blocks):
+        self.data.update(blocks)
+        (self.folder / "scene.json").write_text(json.dumps(self.data, indent=2) + "\n")
+        return self.folder

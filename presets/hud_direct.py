@@ -1,0 +1,175 @@
+"""hud-direct: the paper's HUD without a diffuse screen (sec. 3, Fig. 5; sec. 4.2).
+
+Light path: three LEDs (0.2 x 0.2 mm dies, paper sec. 3) -> a narrow-angle raster scatterer
+(Gaussian lobe, sec. 4.2) -> an LCD slide (clear symbols on a 300:1 black, sec. 3) in an absorbing
+frame -> a concave mirror -> the inner surface of a 4.76 mm windshield (n = 1.52, both surfaces
+traced) -> the eye. Numbers from ../shared/reference/hud-physics.md: virtual image at 2.5 m, field
+about 6 x 2 deg, 4 mm pupil, windshield incidence 60-70 deg (here 67 deg), LCD transmission 5 %.
+
+Optical design (units mm, z up, y forward, x to the right; the mirror sits at the origin so that
+float32 Embree resolves the optics finely):
+
+- The eye E looks 4 deg down; its chief ray meets the windshield after 800 mm and the mirror after
+  another 300 mm. E' is E mirrored in the windshield's inner plane (|E'M| = d2 = 1100 mm).
+- The mirror is a patch of the ellipsoid whose foci are E' and the centre LED L (|LM| = d1 = 250 mm):
+  it images the LED stigmatically onto the (mirrored) pupil, so an eye at E sees the whole field lit
+  through the LCD (the hint of the issue). Its power is P = 1/d1 + 1/d2 in both meridians.
+- The LCD lies on the line ML at s_o = 1 / (P + 1/(VID - d2)) = 177.6 mm from the mirror, where the
+  mirror forms its virtual image at VID = 2500 mm from the eye (magnification 7.9); its size follows
+  from the field of view.
+- The scatterer (sigma 3 x 2.5 deg) spreads each LED's light into an eyebox; the two outer LEDs,
+  5 mm to either side, widen it horizontally. The scatterer aims a share of its light "away from"
+  the image of the eye pupil formed by the mirror (at the LED, radius r_pupil d1/d2): the paper's
+  directed split toward the entrance pupil of the optical system (sec. 2).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ._build import SceneBuilder, box, disk, frame_matrix, rectangle
+from .slide import slide_image
+
+NAME = "hud-direct"
+SUMMARY = "the paper's direct-view HUD: LEDs, raster scatterer, LCD 300:1, concave mirror, 4.76 mm windshield"
+
+EYE_TO_WINDSHIELD = 800.0
+WINDSHIELD_TO_MIRROR = 300.0
+LED_TO_MIRROR = 250.0  # d1
+VID = 2500.0  # virtual image distance from the eye, mm
+LOOK_DOWN_DEG = 4.0
+RAKE_DEG = 27.0  # windshield angle from horizontal
+MIRROR_INCIDENCE_DEG = 20.0
+FOV_DEG = (6.0, 2.0)  # the LCD's virtual image
+VIEW_DEG = (7.0, 2.6)  # the retina image: a margin around the display
+RESOLUTION = (420, 156)  # 1 arcmin pixels
+PUPIL_MM = 4.0
+GLASS_MM = 4.76
+LED_LUMINANCE = 1.0e9  # cd/m^2 per die (see README: what the design's etendue demands)
+LED_PITCH = 5.0
+SCATTER_SIGMA_DEG = (3.0, 2.5)
+LCD_TRANSMITTANCE = 0.05
+CONTRAST = 300.0
+MIRROR_R = 0.9
+
+
+def _rot(v: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
+    """Rodrigues rotation of v about a unit axis."""
+    a = math.radians(deg)
+    return v * math.cos(a) + np.cross(axis, v) * math.sin(a) + axis * (axis @ v) * (1 - math.cos(a))
+
+
+def design() -> dict:
+    """The layout: every point and direction of the optical design (world mm)."""
+    mirror = np.zeros(3)
+    ld = math.radians(LOOK_DOWN_DEG)
+    gaze = np.array([0.0, math.cos(ld), -math.sin(ld)])
+    rake = math.radians(RAKE_DEG)
+    n_ws = np.array([0.0, -math.sin(rake), -math.cos(rake)])  # inner surface normal, toward the driver
+    r1 = gaze - 2 * (gaze @ n_ws) * n_ws  # eye ray after the windshield
+    w_point = mirror - WINDSHIELD_TO_MIRROR * r1
+    eye = w_point - EYE_TO_WINDSHIELD * gaze
+    eye_image = eye - 2 * ((eye - w_point) @ n_ws) * n_ws
+    x_axis = np.array([1.0, 0.0, 0.0])
+    r2 = _rot(-r1, x_axis, 2 * MIRROR_INCIDENCE_DEG)  # from the mirror toward the LCD and the LED
+    led = mirror + LED_TO_MIRROR * r2
+    d2 = EYE_TO_WINDSHIELD + WINDSHIELD_TO_MIRROR
+    power = 1 / LED_TO_MIRROR + 1 / d2
+    s_o = 1 / (power + 1 / (VID - d2))
+    magnification = (VID - d2) / s_o
+    lcd_size = [2 * VID * math.tan(math.radians(f) / 2) / magnification for f in FOV_DEG]
+    return {"mirror": mirror, "gaze": gaze, "n_ws": n_ws, "w_point": w_point, "eye": eye, "eye_image": eye_image,
+            "r1": r1, "r2": r2, "led": led, "s_o": s_o, "magnification": magnification, "lcd_size": lcd_size,
+            "lcd_center": mirror + s_o * r2, "d2": d2, "incidence_windshield_deg":
+            math.degrees(math.acos(abs(gaze @ n_ws)))}
+
+
+def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tuple[float, float],
+                    x_axis: np.ndarray, n: tuple[int, int] = (160, 110)):
+    """Triangulated patch of the ellipsoid with foci f1, f2 through ``center`` (|X f1| + |X f2| = const),
+    over a ``size`` rectangle of its tangent plane: (vertices, faces)."""
+    u1 = (f1 - center) / np.linalg.norm(f1 - center)
+    u2 = (f2 - center) / np.linalg.norm(f2 - center)
+    normal = (u1 + u2) / np.linalg.norm(u1 + u2)
+    total = np.linalg.norm(f1 - center) + np.linalg.norm(f2 - center)
+    v, f, _ = rectangle(size[0], size[1], n[0], n[1])
+    m = np.array(frame_matrix(center, x_axis, normal))
+    q = v @ m[:3, :3].T + m[:3, 3]
+    s = np.zeros(len(q))
+    for _ in range(30):  # Newton along the normal onto the ellipsoid
+        x = q + s[:, None] * normal
+        a, b = x - f1, x - f2
+        la, lb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+        g = la + lb - total
+        dg = (a @ normal) / la + (b @ normal) / lb
+        s -= g / dg
+    return q + s[:, None] * normal, f
+
+
+def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
+    d = design()
+    sb = SceneBuilder(Path(folder), NAME, SUMMARY)
+    x_axis = np.array([1.0, 0.0, 0.0])
+    r2 = d["r2"]
+    # Windshield: a glass slab whose inner face passes through the windshield point.
+    rake = math.radians(RAKE_DEG)
+    along = np.array([0.0, -math.cos(rake), math.sin(rake)])
+    slab_center = d["w_point"] - 0.5 * GLASS_MM * d["n_ws"]
+    v, f = box(700.0, 450.0, GLASS_MM)
+    sb.add("windshield", (v, f), {"type": "dielectric", "ior": 1.52},
+           frame_matrix(slab_center, x_axis, d["n_ws"]))
+    # Mirror: the ellipsoid patch with foci E' and the centre LED.
+    sb.add("mirror", ellipsoid_patch(d["eye_image"], d["led"], d["mirror"], (170.0, 120.0), x_axis),
+           {"type": "mirror", "reflectance": MIRROR_R}, smooth=True)
+    # LCD, facing the mirror; its slide is written beside the meshes.
+    w_lcd, h_lcd = d["lcd_size"]
+    img_rel = "textures/slide.png"
+    slide_image(sb.folder / img_rel)
+    lcd_v, lcd_f, lcd_uv = rectangle(w_lcd, h_lcd)
+    lcd_frame = frame_matrix(d["lcd_center"], -x_axis, -r2)
+    sb.add("lcd", (lcd_v, lcd_f), {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE,
+                                   "contrast_ratio": CONTRAST}, lcd_frame, uv=lcd_uv)
+    # Opaque frame around the LCD (four bars) so no unmodulated light passes beside it.
+    bar = 30.0
+    for i, (cx, cy, sx, sy) in enumerate([(0, (h_lcd + bar) / 2, w_lcd + 2 * bar, bar),
+                                          (0, -(h_lcd + bar) / 2, w_lcd + 2 * bar, bar),
+                                          ((w_lcd + bar) / 2, 0, bar, h_lcd),
+                                          (-(w_lcd + bar) / 2, 0, bar, h_lcd)]):
+        bv, bf, _ = rectangle(sx, sy)
+        sb.add(f"lcd_frame_{i}", (bv + [cx, cy, 0.0], bf), {"type": "absorber"}, lcd_frame)
+    # Raster scatterer 3 mm behind the LCD, a little larger than it.
+    pupil_image_r = 0.5 * pupil_mm * LED_TO_MIRROR / d["d2"]
+    scat_center = d["lcd_center"] + 3.0 * r2
+    sb.add("scatterer", rectangle(w_lcd + 6, h_lcd + 6)[:2],
+           {"type": "diffuser", "transmittance": 0.9, "sigma_deg": list(SCATTER_SIGMA_DEG),
+            "aim": {"target": "pupil_image", "share": 0.8, "mode": "away"}},
+           frame_matrix(scat_center, x_axis, -r2))
+    # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED.
+    sb.add("pupil_image", disk(1.5 * pupil_image_r, 64), {"type": "aperture"},
+           frame_matrix(d["led"] - 0.01 * r2, x_axis, -r2))
+    # LED dies facing the scatterer, aimed at it.
+    for k, dx in enumerate((-LED_PITCH, 0.0, LED_PITCH)):
+        lv, lf, _ = rectangle(0.2, 0.2)
+        sb.add(f"led_{k}", (lv, lf), {"type": "emitter", "luminance": LED_LUMINANCE,
+                                      "aim": {"target": "scatterer", "share": 0.95}},
+               frame_matrix(d["led"] + dx * x_axis, x_axis, -r2))
+    # Housing below the LED so that nothing escapes backward into the view.
+    hv, hf, _ = rectangle(40.0, 40.0)
+    sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(d["led"] + 1.0 * r2, x_axis, -r2))
+    eye = d["eye"]
+    return sb.write(
+        eye={"position": eye.tolist(), "gaze": d["gaze"].tolist(), "up": [0.0, 0.0, 1.0],
+             "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67, "accommodation_distance_mm": VID,
+             "resolution": list(resolution), "fov_deg": list(VIEW_DEG)},
+        forward={"max_depth": 24},
+        backward={"max_depth": 24},
+    )
+
+
+def eyebox_note() -> str:
+    d = design()
+    return (f"windshield incidence {d['incidence_windshield_deg']:.1f} deg, LCD {d['lcd_size'][0]:.1f} x "
+            f"{d['lcd_size'][1]:.1f} mm at {d['s_o']:.1f} mm from the mirror, magnification {d['magnification']:.2f}")

@@ -1,0 +1,383 @@
+"""Tests of tracer.environment: Blender's equirectangular mapping, rotation, calibration,
+the three environment kinds and the scene.json factory."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from tracer.environment import (
+    HdriEnvironment,
+    NoEnvironment,
+    UniformEnvironment,
+    direction_to_equirect,
+    environment_from_spec,
+    equirect_to_direction,
+    row_solid_angle_fractions,
+)
+from tracer.errors import SceneError
+from tracer.imageio import write_exr
+from tracer.units import luminance
+
+
+def _uniform_sphere(n: int, seed: int) -> np.ndarray:
+    """``n`` directions uniformly distributed over the unit sphere, shape (n, 3)."""
+    d = np.random.default_rng(seed).normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _pixel_centre_directions(height: int, width: int) -> np.ndarray:
+    """Directions of the pixel centres, shape (H, W, 3): row 0 is the top row."""
+    rows, cols = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    u = (cols.ravel() + 0.5) / width
+    v = 1.0 - (rows.ravel() + 0.5) / height
+    return equirect_to_direction(u, v).reshape(height, width, 3)
+
+
+def _rot_z(degrees: float) -> np.ndarray:
+    """Rotation matrix about +z, counter-clockwise seen from above."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _feature_image(height: int, width: int, u: float, v: float) -> np.ndarray:
+    """Black image with a 2 x 2 block of value 1 centred on (u, v) (both on pixel edges)."""
+    image = np.zeros((height, width, 3))
+    col = round(u * width)
+    row = round((1.0 - v) * height)
+    image[row - 1 : row + 1, col - 1 : col + 1] = 1.0
+    return image
+
+
+# --- mapping conventions ------------------------------------------------------------------
+
+
+def test_axes_land_where_blender_puts_them():
+    d = np.array(
+        [[1, 0, 0], [0, 1, 0], [0, -1, 0], [-1, 0, 0], [0, 0, 1], [0, 0, -1]], dtype=float
+    )
+    u, v = direction_to_equirect(d)
+    np.testing.assert_allclose(u[:3], [0.5, 0.25, 0.75], atol=1e-15)
+    assert u[3] in (0.0, 1.0)  # -x lies on the seam
+    np.testing.assert_allclose(v, [0.5, 0.5, 0.5, 0.5, 1.0, 0.0], atol=1e-15)
+
+
+def test_direction_uv_round_trip():
+    d = _uniform_sphere(1000, seed=1)
+    u, v = direction_to_equirect(d)
+    assert np.all((0 <= u) & (u <= 1) & (0 <= v) & (v <= 1))
+    np.testing.assert_allclose(equirect_to_direction(u, v), d, atol=1e-12)
+
+
+def test_direction_pixel_direction_round_trip():
+    # Bilinear lookup at a pixel centre returns that pixel exactly.
+    image = np.random.default_rng(2).random((6, 12, 3))
+    env = HdriEnvironment(image, "scale", 1.0)
+    centres = _pixel_centre_directions(6, 12)
+    radiance = env.radiance(centres.reshape(-1, 3))
+    np.testing.assert_allclose(radiance, image.reshape(-1, 3), rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("direction", "u", "v"),
+    [
+        ((1, 0, 0), 0.5, 0.5),
+        ((0, 1, 0), 0.25, 0.5),
+        ((0, -1, 0), 0.75, 0.5),
+        ((math.sqrt(0.5), 0, math.sqrt(0.5)), 0.5, 0.75),  # 45 degrees up from +x
+    ],
+)
+def test_feature_is_seen_in_its_direction(direction, u, v):
+    env = HdriEnvironment(_feature_image(8, 16, u, v), "scale", 1.0)
+    np.testing.assert_allclose(env.radiance(np.array([direction], float)), [[1.0, 1.0, 1.0]])
+    assert env.radiance(-np.array([direction], float)).max() == 0.0
+
+
+def test_top_row_is_up():
+    image = np.zeros((4, 8, 3))
+    image[0] = 5.0
+    env = HdriEnvironment(image, "scale", 1.0)
+    np.testing.assert_allclose(env.radiance(np.array([[0.0, 0.0, 1.0]])), [[5.0, 5.0, 5.0]])
+    np.testing.assert_allclose(env.radiance(np.array([[0.0, 0.0, -1.0]])), [[0.0, 0.0, 0.0]])
+
+
+def test_wraps_across_the_seam():
+    image = np.zeros((2, 8, 3))
+    image[:, 0] = 2.0  # left column
+    image[:, -1] = 4.0  # right column
+    env = HdriEnvironment(image, "scale", 1.0)
+    # -x lies on the seam, midway between the centres of the last and first columns.
+    np.testing.assert_allclose(env.radiance(np.array([[-1.0, 0.0, 0.0]])), [[3.0, 3.0, 3.0]])
+
+
+# --- rotation -------------------------------------------------------------------------------
+
+
+def test_rotation_by_90_degrees_moves_the_centre_from_x_to_y():
+    image = _feature_image(8, 16, 0.5, 0.5)  # feature at +x
+    x, y, minus_y = np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]), np.array([[0, -1.0, 0]])
+    env = HdriEnvironment(image, "scale", 1.0, rotation_deg=90.0)
+    np.testing.assert_allclose(env.radiance(y), [[1.0, 1.0, 1.0]], atol=1e-12)
+    assert env.radiance(x).max() < 1e-12
+    env = HdriEnvironment(image, "scale", 1.0, rotation_deg=-90.0)
+    np.testing.assert_allclose(env.radiance(minus_y), [[1.0, 1.0, 1.0]], atol=1e-12)
+
+
+def test_rotation_turns_the_whole_panorama_counter_clockwise():
+    image = np.random.default_rng(3).random((16, 32, 3))
+    env = HdriEnvironment(image, "scale", 1.0)
+    turned = HdriEnvironment(image, "scale", 1.0, rotation_deg=37.0)
+    d = _uniform_sphere(500, seed=4)
+    np.testing.assert_allclose(turned.radiance(d @ _rot_z(37.0).T), env.radiance(d), atol=1e-12)
+
+
+# --- calibration ----------------------------------------------------------------------------
+
+
+def test_row_solid_angles_are_exact_bands():
+    H, W = 7, 13
+    fractions = row_solid_angle_fractions(H)
+    assert fractions.sum() == pytest.approx(1.0, rel=1e-15)
+    lat_top = np.pi / 2 - np.pi * np.arange(H) / H
+    lat_bottom = lat_top - np.pi / H
+    omega = 2 * np.pi / W * (np.sin(lat_top) - np.sin(lat_bottom))  # one pixel, sr
+    np.testing.assert_allclose(fractions, W * omega / (4 * np.pi), rtol=1e-14)
+
+
+def test_constant_image_gives_constant_radiance():
+    env = HdriEnvironment(np.full((9, 20, 3), [0.5, 1.0, 2.0]), "scale", 3.0)
+    d = np.vstack([_uniform_sphere(1000, seed=5), [[0, 0, 1], [0, 0, -1], [-1, 0, 0]]])
+    np.testing.assert_allclose(env.radiance(d), np.tile([1.5, 3.0, 6.0], (len(d), 1)), rtol=1e-14)
+
+
+def test_scale_calibration():
+    image = np.random.default_rng(6).random((6, 12, 3))
+    env = HdriEnvironment(image, "scale", 250.0)
+    assert env.scale_factor == 250.0
+    centres = _pixel_centre_directions(6, 12).reshape(-1, 3)
+    np.testing.assert_allclose(env.radiance(centres), 250.0 * image.reshape(-1, 3), rtol=1e-12)
+    assert env.max_luminance == pytest.approx(250.0 * luminance(image).max(), rel=1e-14)
+
+
+def test_mean_calibration_is_exact():
+    H, W = 12, 24
+    image = np.random.default_rng(7).random((H, W, 3)) * np.linspace(0.1, 3.0, H)[:, None, None]
+    env = HdriEnvironment(image, "mean", 1000.0)
+    # Solid angle of each pixel: (2 pi / W) (sin lat_top - sin lat_bottom), summing to 4 pi.
+    lat_top = np.pi / 2 - np.pi * np.arange(H) / H
+    omega = 2 * np.pi / W * (np.sin(lat_top) - np.sin(lat_top - np.pi / H))
+    assert W * omega.sum() == pytest.approx(4 * np.pi, rel=1e-14)
+    Y = env.scale_factor * luminance(image)
+    mean = (Y * omega[:, None]).sum() / (4 * np.pi)
+    assert mean == pytest.approx(1000.0, rel=1e-9)
+    assert env.mean_luminance == pytest.approx(1000.0, rel=1e-9)
+
+
+def test_mean_calibration_monte_carlo():
+    H, W = 32, 64
+    rng = np.random.default_rng(8)
+    brighter_up = np.linspace(2.0, 0.5, H)[:, None, None]
+    image = (0.5 + rng.random((H, W, 3))) * brighter_up
+    env = HdriEnvironment(image, "mean", 20.0)
+    d = _uniform_sphere(400_000, seed=9)
+    assert luminance(env.radiance(d)).mean() == pytest.approx(20.0, rel=0.01)
+
+
+def test_max_calibration():
+    image = np.random.default_rng(10).random((8, 16, 3))
+    env = HdriEnvironment(image, "max", 5000.0)
+    assert env.max_luminance == pytest.approx(5000.0, rel=1e-14)
+    Y = luminance(image)
+    row, col = np.unravel_index(np.argmax(Y), Y.shape)
+    brightest = _pixel_centre_directions(8, 16)[row, col][None, :]
+    assert luminance(env.radiance(brightest))[0] == pytest.approx(5000.0, rel=1e-12)
+    assert luminance(env.radiance(_uniform_sphere(20_000, seed=11))).max() <= 5000.0 * (1 + 1e-12)
+
+
+def test_hdri_rejects_bad_input():
+    good = np.ones((4, 8, 3))
+    negative = good.copy()
+    negative[1, 2, 0] = -1e-3
+    not_finite = good.copy()
+    not_finite[0, 0, 1] = np.inf
+    for image in [negative, not_finite, np.ones((4, 8)), np.ones((4, 8, 4)), np.ones((0, 8, 3))]:
+        with pytest.raises(ValueError):
+            HdriEnvironment(image, "scale", 1.0)
+    for calibration, value in [("median", 1.0), ("mean", 0.0), ("max", -2.0), ("scale", math.nan)]:
+        with pytest.raises(ValueError):
+            HdriEnvironment(good, calibration, value)
+    with pytest.raises(ValueError):
+        HdriEnvironment(good, "scale", 1.0, rotation_deg=math.inf)
+    for calibration in ("mean", "max"):
+        with pytest.raises(ValueError, match="zero everywhere"):
+            HdriEnvironment(np.zeros((4, 8, 3)), calibration, 1.0)
+    assert HdriEnvironment(np.zeros((4, 8, 3)), "scale", 1.0).is_black
+
+
+def test_hdri_keeps_its_own_copy():
+    image = np.ones((4, 8, 3), np.float32)
+    env = HdriEnvironment(image, "scale", 2.0)
+    image[:] = 7.0
+    np.testing.assert_array_equal(env.radiance(np.array([[1.0, 0, 0]])), [[2.0, 2.0, 2.0]])
+    assert env.radiance(np.array([[1.0, 0, 0]])).dtype == np.float64
+
+
+# --- no environment, uniform environment -------------------------------------------------------
+
+
+def test_no_environment():
+    env = NoEnvironment()
+    r = env.radiance(_uniform_sphere(5, seed=12))
+    assert r.shape == (5, 3) and r.dtype == np.float64 and not r.any()
+    assert env.is_black and env.mean_luminance == 0.0 and env.max_luminance == 0.0
+
+
+def test_uniform_environment():
+    env = UniformEnvironment(300.0, color=(1.0, 0.5, 0.25))
+    r = env.radiance(_uniform_sphere(7, seed=13))
+    assert r.shape == (7, 3) and r.dtype == np.float64
+    np.testing.assert_allclose(luminance(r), 300.0, rtol=1e-14)
+    np.testing.assert_allclose(r[:, 1] / r[:, 0], 0.5, rtol=1e-14)
+    assert env.mean_luminance == env.max_luminance == 300.0 and not env.is_black
+    assert UniformEnvironment(0.0).is_black
+    for bad in [-1.0, math.inf, math.nan]:
+        with pytest.raises(ValueError):
+            UniformEnvironment(bad)
+    with pytest.raises(ValueError):
+        UniformEnvironment(1.0, color=(0.0, 0.0, 0.0))
+
+
+def test_radiance_rejects_bad_directions():
+    hdri = HdriEnvironment(np.ones((2, 4, 3)), "scale", 1.0)
+    for env in [NoEnvironment(), UniformEnvironment(1.0), hdri]:
+        with pytest.raises(ValueError):
+            env.radiance(np.ones(3))
+        with pytest.raises(ValueError):
+            env.radiance(np.array([[np.nan, 0.0, 1.0]]))
+
+
+# --- environment_from_spec ------------------------------------------------------------------
+
+
+@pytest.fixture
+def scene_dir(tmp_path):
+    """A scene folder with panoramas good and bad."""
+    textures = tmp_path / "textures"
+    textures.mkdir()
+    rng = np.random.default_rng(14)
+    rgb = rng.random((8, 16, 3))
+    write_exr(textures / "sky.exr", {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    write_exr(textures / "black.exr", {c: np.zeros((4, 8)) for c in "RGB"})
+    write_exr(textures / "negative.exr", {c: np.full((4, 8), -1.0) for c in "RGB"})
+    write_exr(textures / "five.exr", {c: np.ones((4, 8)) for c in ["R", "G", "B", "Y", "Y_var"]})
+    write_exr(textures / "rgba.exr", {"R": np.ones((4, 8)), "G": np.ones((4, 8)),
+                                      "B": np.ones((4, 8)), "A": np.full((4, 8), 0.5)})
+    grey = oiio.ImageOutput.create("png")
+    assert grey.open(str(textures / "grey.png"), oiio.ImageSpec(8, 4, 1, oiio.UINT8))
+    assert grey.write_image(np.full((4, 8, 1), 128, np.uint8)) and grey.close()
+    (textures / "corrupt.exr").write_bytes(b"not an EXR file at all")
+    return tmp_path
+
+
+def test_spec_none_and_uniform(scene_dir):
+    assert isinstance(environment_from_spec({"type": "none"}, scene_dir), NoEnvironment)
+    env = environment_from_spec({"type": "uniform", "luminance": 10}, scene_dir)
+    assert isinstance(env, UniformEnvironment) and env.mean_luminance == 10.0
+    env = environment_from_spec(_uniform(luminance=5.0, color=[0, 1, 0]), scene_dir)
+    np.testing.assert_allclose(env.radiance(np.array([[0, 0, 1.0]])), [[0, 5.0 / 0.7152, 0]])
+
+
+def test_spec_hdri(scene_dir):
+    spec = {
+        "type": "hdri",
+        "file": "textures/sky.exr",
+        "calibration": {"mode": "mean", "value": 800},
+        "rotation_deg": 45,
+    }
+    env = environment_from_spec(spec, scene_dir)
+    assert isinstance(env, HdriEnvironment)
+    assert env.mean_luminance == pytest.approx(800.0, rel=1e-9)
+    assert env.rotation_deg == 45.0 and env.source == "textures/sky.exr"
+    assert env.calibration == "mean" and env.value == 800.0 and env.scale_factor > 0
+
+
+def test_spec_hdri_grey_png_is_decoded_and_grey(scene_dir):
+    env = environment_from_spec(_hdri(file="textures/grey.png", rotation_deg=10), scene_dir)
+    np.testing.assert_allclose(env.radiance(np.array([[1.0, 0, 0]])), [[0.2158605] * 3], rtol=1e-6)
+
+
+def test_spec_hdri_drops_alpha(scene_dir):
+    env = environment_from_spec(_hdri(file="textures/rgba.exr"), scene_dir)
+    np.testing.assert_array_equal(env.radiance(np.array([[0, 0, 1.0]])), [[1.0, 1.0, 1.0]])
+
+
+def _hdri(**fields):
+    calibration = {"mode": "scale", "value": 1}
+    return {"type": "hdri", "file": "textures/sky.exr", "calibration": calibration, **fields}
+
+
+def _uniform(**fields):
+    return {"type": "uniform", "luminance": 1.0, **fields}
+
+
+@pytest.mark.parametrize(
+    ("spec", "field"),
+    [
+        ("none", "environment"),
+        ({}, "environment.type"),
+        ({"type": "sky"}, "environment.type"),
+        ({"type": 3}, "environment.type"),
+        ({"type": ["hdri"]}, "environment.type"),
+        ({"type": "none", "luminance": 1}, "environment.luminance"),
+        ({"type": "uniform"}, "environment.luminance"),
+        (_uniform(luminance=-1), "environment.luminance"),
+        (_uniform(luminance="10"), "environment.luminance"),
+        (_uniform(luminance=True), "environment.luminance"),
+        (_uniform(luminance=float("nan")), "environment.luminance"),
+        (_uniform(luminance=None), "environment.luminance"),
+        (_uniform(color=[1, 1]), "environment.color"),
+        (_uniform(color="white"), "environment.color"),
+        (_uniform(color=[1, -1, 1]), "environment.color[1]"),
+        (_uniform(color=[1, 1, "1"]), "environment.color[2]"),
+        (_uniform(color=[0, 0, 0]), "environment.color"),
+        (_uniform(colour=[1, 1, 1]), "environment.colour"),
+        ({"type": "hdri", "calibration": {"mode": "scale", "value": 1}}, "environment.file"),
+        (_hdri(file=3), "environment.file"),
+        (_hdri(file=""), "environment.file"),
+        (_hdri(file="textures/missing.exr"), "environment.file"),
+        (_hdri(file="textures/corrupt.exr"), "environment.file"),
+        (_hdri(file="textures/five.exr"), "environment.file"),
+        (_hdri(file="textures/negative.exr"), "environment.file"),
+        (_hdri(file="textures/black.exr", calibration={"mode": "mean", "value": 1}),
+         "environment.file"),
+        ({"type": "hdri", "file": "textures/sky.exr"}, "environment.calibration"),
+        (_hdri(calibration="mean"), "environment.calibration"),
+        (_hdri(calibration={"value": 1}), "environment.calibration.mode"),
+        (_hdri(calibration={"mode": "median", "value": 1}), "environment.calibration.mode"),
+        (_hdri(calibration={"mode": "mean"}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "mean", "value": 0}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "max", "value": -5}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "max", "value": "5"}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "max", "value": 5, "unit": "nit"}),
+         "environment.calibration.unit"),
+        (_hdri(rotation_deg="90"), "environment.rotation_deg"),
+        (_hdri(rotation_deg=float("inf")), "environment.rotation_deg"),
+        (_hdri(rotation=90), "environment.rotation"),
+    ],
+)
+def test_spec_errors_name_the_field(scene_dir, spec, field):
+    with pytest.raises(SceneError) as info:
+        environment_from_spec(spec, scene_dir, file="scenes/demo/scene.json")
+    assert info.value.field == field
+    assert info.value.file == "scenes/demo/scene.json"
+    assert info.value.message
+
+
+def test_spec_unreadable_image_reports_the_reason(scene_dir):
+    with pytest.raises(SceneError) as info:
+        environment_from_spec(_hdri(file="textures/missing.exr"), scene_dir)
+    assert "textures/missing.exr" in info.value.message
+    assert info.value.file == "scene.json"

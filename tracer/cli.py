@@ -1,0 +1,181 @@
+"""Command line: ``hud-trace render | presets | export | methods``.
+
+Exit status: 0 success; 2 bad input (the message names the file and the field; nothing is
+written); 3 the method found no light path (the outputs are written and say so); 130 interrupted
+with Ctrl-C (what was accumulated is written, marked ``"partial": true``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .errors import SceneError
+
+EXIT_INPUT, EXIT_NO_LIGHT, EXIT_INTERRUPTED = 2, 3, 130
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr (rewritten in place on a terminal)."""
+
+    def __init__(self, stream=sys.stderr, width: int = 30):
+        self.stream, self.width = stream, width
+        self.tty = stream.isatty()
+        self._last = 0.0
+
+    def __call__(self, fraction: float, message: str):
+        now = time.monotonic()
+        if not self.tty and now - self._last < 5 and fraction < 1:
+            return
+        self._last = now
+        filled = int(self.width * fraction)
+        line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:5.1f}%  {message}"
+        self.stream.write(("\r" + line) if self.tty else line + "\n")
+        self.stream.flush()
+
+    def close(self):
+        if self.tty:
+            self.stream.write("\n")
+
+
+class StopFlag:
+    """First Ctrl-C asks the render to stop after the current batch; a second one aborts."""
+
+    def __init__(self):
+        self.stop = False
+
+    def __call__(self) -> bool:
+        return self.stop
+
+    def handler(self, signum, frame):
+        if self.stop:
+            raise KeyboardInterrupt
+        self.stop = True
+        sys.stderr.write("\ninterrupt: finishing the current batch and writing a partial result "
+                         "(Ctrl-C again to abort)\n")
+
+
+def _resolve_scene(arg: str, tmp: Path) -> Path:
+    """A scene folder as given, or a preset name exported into ``tmp``."""
+    from presets import PRESETS
+
+    p = Path(arg)
+    if p.is_dir() or p.name == "scene.json":
+        return p
+    if arg in PRESETS:
+        folder = tmp / arg
+        PRESETS[arg].write(folder)
+        return folder
+    raise SceneError(arg, "", f"neither a scene folder nor a preset (presets: {', '.join(PRESETS)})")
+
+
+def cmd_render(args) -> int:
+    from .integrators import Budget
+    from .render import render_folder
+
+    budget = Budget(rays=args.rays, seconds=args.seconds)
+    flag = StopFlag()
+    previous = signal.signal(signal.SIGINT, flag.handler)
+    bar = None if args.quiet else ProgressBar()
+    try:
+        with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
+            scene_dir = _resolve_scene(args.scene, Path(tmp))
+            report, result = render_folder(scene_dir, args.method, budget, args.seed, args.out,
+                                           progress=bar, should_stop=flag, batch_size=args.batch_size)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if bar:
+            bar.close()
+    lum = report["luminance"]
+    print(f"{args.method}: {report['rays']:,} rays, {report['paths']:,} paths in {report['seconds']:.1f} s "
+          f"({report['rays_per_second']:,.0f} rays/s); efficiency {report['efficiency']:.3e}; "
+          f"luminance mean {lum['mean']:.4g}, max {lum['max']:.4g} cd/m^2 -> {args.out}", file=sys.stderr)
+    for w in report["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    if result.partial:
+        return EXIT_INTERRUPTED
+    if result.found == 0:
+        return EXIT_NO_LIGHT
+    return 0
+
+
+def cmd_presets(args) -> int:
+    from presets import PRESETS
+
+    for name, mod in PRESETS.items():
+        print(f"{name:18s} {mod.SUMMARY}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from presets import PRESETS
+
+    if args.preset not in PRESETS:
+        raise SceneError(args.preset, "", f"unknown preset (presets: {', '.join(PRESETS)})")
+    out = Path(args.dir)
+    if out.exists() and any(out.iterdir()):
+        raise SceneError(str(out), "", "the target folder exists and is not empty")
+    with tempfile.TemporaryDirectory(dir=out.parent if out.parent.exists() else None) as tmp:
+        staged = Path(tmp) / "scene"
+        PRESETS[args.preset].write(staged)
+        if out.exists():
+            out.rmdir()
+        shutil.move(str(staged), str(out))
+    print(f"wrote {args.preset} to {out}", file=sys.stderr)
+    return 0
+
+
+def cmd_methods(args) -> int:
+    from .integrators import INTEGRATORS
+
+    for name, cls in INTEGRATORS.items():
+        print(f"{name:10s} {cls.summary}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .integrators import INTEGRATORS
+
+    ap = argparse.ArgumentParser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
+    sub = ap.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="render a preset or a scene folder")
+    r.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
+    r.add_argument("--method", choices=sorted(INTEGRATORS), default="forward")
+    b = r.add_mutually_exclusive_group(required=True)
+    b.add_argument("--rays", type=int, help="budget in traced ray segments")
+    b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--out", required=True, help="output folder (image.exr, preview.png, report.json)")
+    r.add_argument("--batch-size", type=int, default=None, help="rays per batch (default 131072)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=cmd_render)
+    p = sub.add_parser("presets", help="list the presets")
+    p.set_defaults(func=cmd_presets)
+    e = sub.add_parser("export", help="write a preset's scene folder")
+    e.add_argument("preset")
+    e.add_argument("dir")
+    e.set_defaults(func=cmd_export)
+    m = sub.add_parser("methods", help="list the light-transport methods")
+    m.set_defaults(func=cmd_methods)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except SceneError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except ValueError as e:  # a budget or option out of range
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

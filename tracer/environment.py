@@ -1,0 +1,481 @@
+"""The environment: what a ray sees when it leaves the scene (the scene.json "environment").
+
+An environment gives the radiance arriving from infinitely far away along a direction, in
+linear Rec.709 RGB scaled so that :func:`tracer.units.luminance` of it is the luminance in
+cd/m^2. World axes: z is up (as in Blender); directions are unit vectors.
+
+Three kinds exist: :class:`NoEnvironment` (black), :class:`UniformEnvironment` (the same
+luminance everywhere) and :class:`HdriEnvironment` (an equirectangular panorama, calibrated
+to a luminance). :func:`environment_from_spec` builds one from scene.json.
+
+Equirectangular convention (Blender's, so that the Blender add-on shows the same panorama as
+Blender's Environment Texture node): a direction d = (x, y, z) maps to
+
+    u = 0.5 - atan2(y, x) / (2 pi),        v = 0.5 + atan2(z, hypot(x, y)) / pi,
+
+with u = 0 at the left edge of the image and v = 1 at its top edge (image row 0). So +x is
+at the centre of the image, +y at a quarter of its width, -y at three quarters, -x on the
+left/right seam, +z along the top row. This is ``direction_to_equirectangular`` of Cycles
+(intern/cycles/kernel/camera/projection.h) and ``node_tex_environment_equirectangular`` of
+EEVEE. (Mind the sign: ``-atan2(y, x)``, not ``atan2(y, -x)``, which is half a turn away.)
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from abc import ABC, abstractmethod
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ImageReadError, SceneError
+from .imageio import read_image
+from .units import luminance, normalize_color
+
+#: Calibration modes of :class:`HdriEnvironment`.
+CALIBRATION_MODES = ("scale", "mean", "max")
+
+
+def _as_directions(d) -> np.ndarray:
+    """``d`` as a float64 array of shape (n, 3) of finite values, or ``ValueError``."""
+    d = np.asarray(d, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise ValueError(f"directions must have shape (n, 3), got {d.shape}")
+    if not np.all(np.isfinite(d)):
+        raise ValueError("directions must be finite")
+    return d
+
+
+def direction_to_equirect(d) -> tuple[np.ndarray, np.ndarray]:
+    """Equirectangular coordinates of directions, in Blender's convention (module docstring).
+
+    Parameters
+    ----------
+    d : array_like, shape (n, 3)
+        Directions (any non-zero length; z up).
+
+    Returns
+    -------
+    u : np.ndarray, shape (n,)
+        Horizontal coordinate in [0, 1], 0 at the left edge of the image; +x is at 0.5.
+    v : np.ndarray, shape (n,)
+        Vertical coordinate in [0, 1], 1 at the top edge (image row 0, the +z pole).
+    """
+    d = _as_directions(d)
+    u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * np.pi)
+    v = 0.5 + np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi
+    return u, v
+
+
+def equirect_to_direction(u, v) -> np.ndarray:
+    """Unit directions of equirectangular coordinates; the inverse of :func:`direction_to_equirect`.
+
+    Parameters
+    ----------
+    u, v : array_like, shape (n,)
+        Coordinates as in :func:`direction_to_equirect`.
+
+    Returns
+    -------
+    np.ndarray, shape (n, 3), float64
+        Unit directions (z up).
+    """
+    azimuth = np.pi * (1.0 - 2.0 * np.asarray(u, dtype=np.float64))
+    latitude = np.pi * (np.asarray(v, dtype=np.float64) - 0.5)
+    cos_lat = np.cos(latitude)
+    return np.stack(
+        [cos_lat * np.cos(azimuth), cos_lat * np.sin(azimuth), np.sin(latitude)], axis=-1
+    )
+
+
+def _bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of ``image`` (H, W, 3) at (u, v) of shape (n,); wraps in u, clamps in v.
+
+    Pixel (row i, column j) has its centre at u = (j + 0.5) / W, v = 1 - (i + 0.5) / H.
+    Returns (n, 3) float64.
+    """
+    height, width = image.shape[:2]
+    x = u * width - 0.5
+    y = (1.0 - v) * height - 0.5
+    x0 = np.floor(x)
+    y0 = np.floor(y)
+    fx = (x - x0)[:, None]
+    fy = (y - y0)[:, None]
+    col0 = x0.astype(np.intp) % width
+    col1 = (col0 + 1) % width
+    row0 = np.clip(y0.astype(np.intp), 0, height - 1)
+    row1 = np.clip(y0.astype(np.intp) + 1, 0, height - 1)
+    top = image[row0, col0] * (1.0 - fx) + image[row0, col1] * fx
+    bottom = image[row1, col0] * (1.0 - fx) + image[row1, col1] * fx
+    return top * (1.0 - fy) + bottom * fy
+
+
+def row_solid_angle_fractions(height: int) -> np.ndarray:
+    """Fraction of the sphere covered by each pixel row of an equirectangular image.
+
+    Row i (0 at the top) spans the latitudes lat_top = pi/2 - pi i / H down to
+    lat_bottom = pi/2 - pi (i + 1) / H; each of its W pixels subtends the solid angle
+    (2 pi / W) (sin lat_top - sin lat_bottom) sr, so the row covers
+    (sin lat_top - sin lat_bottom) / 2 of the sphere (4 pi sr).
+
+    Parameters
+    ----------
+    height : int
+        Number of rows H.
+
+    Returns
+    -------
+    np.ndarray, shape (H,), float64
+        Fractions, summing to 1.
+    """
+    edges = 0.5 * np.pi - np.pi * np.arange(height + 1) / height
+    return 0.5 * (np.sin(edges[:-1]) - np.sin(edges[1:]))
+
+
+class Environment(ABC):
+    """Radiance arriving from far away along directions leaving the scene."""
+
+    @abstractmethod
+    def radiance(self, d) -> np.ndarray:
+        """Radiance arriving from directions ``d``.
+
+        Parameters
+        ----------
+        d : array_like, shape (n, 3)
+            Unit directions pointing away from the scene (z up).
+
+        Returns
+        -------
+        np.ndarray, shape (n, 3), float64
+            Linear Rec.709 RGB whose luminance Y is in cd/m^2.
+        """
+
+    @property
+    @abstractmethod
+    def mean_luminance(self) -> float:
+        """Solid-angle-weighted mean luminance over the whole sphere, cd/m^2."""
+
+    @property
+    @abstractmethod
+    def max_luminance(self) -> float:
+        """Largest luminance in any direction, cd/m^2."""
+
+    @property
+    def is_black(self) -> bool:
+        """True when no light comes from any direction."""
+        return self.max_luminance == 0.0
+
+
+class NoEnvironment(Environment):
+    """No environment: black in every direction."""
+
+    def radiance(self, d) -> np.ndarray:
+        return np.zeros((_as_directions(d).shape[0], 3))
+
+    @property
+    def mean_luminance(self) -> float:
+        return 0.0
+
+    @property
+    def max_luminance(self) -> float:
+        return 0.0
+
+
+class UniformEnvironment(Environment):
+    """The same luminance and colour in every direction.
+
+    Parameters
+    ----------
+    luminance_cd_m2 : float
+        Luminance L, cd/m^2, finite and >= 0.
+    color : array_like, shape (3,)
+        Linear Rec.709 colour, normalised to unit luminance (:func:`tracer.units.normalize_color`),
+        so the radiance is ``L * color / Y(color)``.
+
+    Raises
+    ------
+    ValueError
+        A negative or non-finite luminance, or a colour with a negative component or zero
+        luminance.
+    """
+
+    def __init__(self, luminance_cd_m2: float, color=(1.0, 1.0, 1.0)):
+        if not (math.isfinite(luminance_cd_m2) and luminance_cd_m2 >= 0):
+            raise ValueError(f"luminance must be finite and >= 0, got {luminance_cd_m2}")
+        self.luminance_cd_m2 = float(luminance_cd_m2)
+        self.color = normalize_color(color)
+        self._rgb = self.luminance_cd_m2 * self.color
+
+    def radiance(self, d) -> np.ndarray:
+        return np.repeat(self._rgb[None, :], _as_directions(d).shape[0], axis=0)
+
+    @property
+    def mean_luminance(self) -> float:
+        return self.luminance_cd_m2
+
+    @property
+    def max_luminance(self) -> float:
+        return self.luminance_cd_m2
+
+
+class HdriEnvironment(Environment):
+    """An equirectangular panorama (HDRI), calibrated to a luminance.
+
+    Mapping: Blender's equirectangular convention (module docstring, :func:`direction_to_equirect`),
+    with bilinear interpolation between pixel centres, wrapping around in u and clamped in v
+    (rows beyond the top and bottom pixel centres take the edge row's values).
+
+    Rotation: before the lookup the direction is rotated by ``-rotation_deg`` about +z. So the
+    panorama turns by ``+rotation_deg`` counter-clockwise seen from above (from +z looking
+    down): what is seen in direction d at rotation 0 is seen in direction R_z(rotation_deg) d,
+    e.g. with 90 degrees the image centre moves from +x to +y. In Blender this is a Mapping
+    node of type "Texture" with Rotation Z = rotation_deg (equivalently type "Point" with
+    Rotation Z = -rotation_deg) between Texture Coordinate > Generated and the Environment
+    Texture's Vector.
+
+    Calibration: the radiance is ``k * image`` with one factor k (``scale_factor``):
+
+    - ``"scale"``: k = value;
+    - ``"mean"``: k makes the solid-angle-weighted mean luminance of the pixels equal to
+      value cd/m^2; pixel row i weighs its exact solid angle (2 pi / W) (sin lat_top -
+      sin lat_bottom) per pixel (:func:`row_solid_angle_fractions`), i.e. cos(latitude)
+      integrated over the row band;
+    - ``"max"``: k makes the largest pixel luminance equal to value cd/m^2 (bilinear
+      interpolation never exceeds it, so it is also the largest radiance returned).
+
+    Parameters
+    ----------
+    image : array_like, shape (H, W, 3)
+        Linear Rec.709 RGB, finite and >= 0; row 0 is the top row (the +z pole). Kept as
+        float32 if given as float32, else as float64; lookups compute in float64.
+    calibration : str
+        One of ``"scale"``, ``"mean"``, ``"max"``.
+    value : float
+        The calibration value (k for "scale", cd/m^2 otherwise), finite and > 0.
+    rotation_deg : float
+        Rotation of the panorama about +z, degrees, counter-clockwise seen from above.
+    source : str
+        Where the image came from (for reports).
+
+    Raises
+    ------
+    ValueError
+        An image of the wrong shape or with negative or non-finite pixels, an unknown
+        calibration, a value <= 0 or not finite, a non-finite rotation, or an image whose
+        luminance is zero everywhere with calibration "mean" or "max".
+    """
+
+    def __init__(
+        self,
+        image,
+        calibration: str,
+        value: float,
+        rotation_deg: float = 0.0,
+        source: str = "",
+    ):
+        image = np.asarray(image)
+        if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] == 0 or image.shape[1] == 0:
+            raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
+        dtype = np.float32 if image.dtype == np.float32 else np.float64
+        self._image = np.array(image, dtype=dtype)
+        self._image.flags.writeable = False
+        if not np.all(np.isfinite(self._image)):
+            raise ValueError("image has non-finite pixels")
+        if np.any(self._image < 0):
+            raise ValueError("image has negative pixels")
+        if calibration not in CALIBRATION_MODES:
+            raise ValueError(
+                f"unknown calibration {calibration!r}; expected one of {CALIBRATION_MODES}"
+            )
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"calibration value must be finite and > 0, got {value}")
+        if not math.isfinite(rotation_deg):
+            raise ValueError(f"rotation must be finite, got {rotation_deg}")
+        Y = luminance(self._image)
+        raw_mean = float(row_solid_angle_fractions(Y.shape[0]) @ Y.mean(axis=1))
+        raw_max = float(Y.max())
+        if calibration != "scale" and raw_max == 0.0:
+            raise ValueError(
+                f"image luminance is zero everywhere; calibration {calibration!r} cannot scale it"
+            )
+        self.calibration = calibration
+        self.value = float(value)
+        self.rotation_deg = float(rotation_deg)
+        self.source = source
+        if calibration == "scale":
+            self._k = self.value
+        elif calibration == "mean":
+            self._k = self.value / raw_mean
+        else:
+            self._k = self.value / raw_max
+        self._mean = self._k * raw_mean
+        self._max = self._k * raw_max
+        angle = math.radians(self.rotation_deg)
+        self._cos, self._sin = math.cos(angle), math.sin(angle)
+
+    @property
+    def scale_factor(self) -> float:
+        """k: the factor applied to the image's own linear values (the value itself for
+        "scale"; cd/m^2 per unit of image luminance for "mean" and "max")."""
+        return self._k
+
+    def radiance(self, d) -> np.ndarray:
+        d = _as_directions(d)
+        # Rotate by -rotation_deg about +z: (x, y) -> (c x + s y, -s x + c y).
+        x = self._cos * d[:, 0] + self._sin * d[:, 1]
+        y = -self._sin * d[:, 0] + self._cos * d[:, 1]
+        u, v = direction_to_equirect(np.stack([x, y, d[:, 2]], axis=-1))
+        return self._k * _bilinear(self._image, u, v)
+
+    @property
+    def mean_luminance(self) -> float:
+        """Solid-angle-weighted mean pixel luminance, cd/m^2 (the measure of the "mean"
+        calibration; the mean of the bilinearly interpolated radiance differs from it by far
+        less than 1 % for panoramas of useful size)."""
+        return self._mean
+
+    @property
+    def max_luminance(self) -> float:
+        """Largest pixel luminance, cd/m^2."""
+        return self._max
+
+
+# Fields each environment type accepts in scene.json.
+_FIELDS = {
+    "none": {"type"},
+    "uniform": {"type", "luminance", "color"},
+    "hdri": {"type", "file", "calibration", "rotation_deg"},
+}
+_CALIBRATION_FIELDS = {"mode", "value"}
+
+
+def _finite_number(value, field: str, file: str, minimum=None, strict=False) -> float:
+    """``value`` as a float if it is a finite real number (not a bool, not a string) that is
+    >= ``minimum`` (> if ``strict``); else a SceneError naming ``field``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise SceneError(file, field, f"must be a finite number, got {value!r}")
+    if minimum is not None and (value <= minimum if strict else value < minimum):
+        relation = ">" if strict else ">="
+        raise SceneError(file, field, f"must be {relation} {minimum:g}, got {value!r}")
+    return float(value)
+
+
+class _SpecReader:
+    """Reads the fields of one JSON object; every error names ``<prefix>.<key>``."""
+
+    def __init__(self, block, prefix: str, file: str, allowed: set):
+        if not isinstance(block, dict):
+            raise SceneError(file, prefix, f"must be an object, got {block!r}")
+        self.block, self.prefix, self.file = block, prefix, file
+        unknown = sorted(set(block) - allowed)
+        if unknown:
+            raise self.error(unknown[0], f"unknown field; expected one of {sorted(allowed)}")
+
+    def error(self, key: str, message: str) -> SceneError:
+        return SceneError(self.file, f"{self.prefix}.{key}", message)
+
+    def required(self, key: str):
+        if key not in self.block:
+            raise self.error(key, "is missing")
+        return self.block[key]
+
+    def choice(self, key: str, choices) -> str:
+        value = self.required(key)
+        if not isinstance(value, str) or value not in choices:
+            raise self.error(key, f"unknown value {value!r}; expected one of {list(choices)}")
+        return value
+
+    def number(self, key: str, default=None, minimum=None, strict=False) -> float:
+        """Field ``key`` (required unless a ``default`` is given) as in :func:`_finite_number`."""
+        value = self.required(key) if default is None else self.block.get(key, default)
+        return _finite_number(value, f"{self.prefix}.{key}", self.file, minimum, strict)
+
+
+def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json") -> Environment:
+    """Build the environment described by the "environment" block of scene.json.
+
+    Accepted blocks (no other fields)::
+
+        {"type": "none"}
+        {"type": "uniform", "luminance": L, "color": [r, g, b]}
+        {"type": "hdri", "file": "relative/path.exr",
+         "calibration": {"mode": "scale" | "mean" | "max", "value": v},
+         "rotation_deg": 0}
+
+    with L >= 0 cd/m^2, ``color`` optional (white; linear Rec.709, normalised to unit
+    luminance), v > 0 (:class:`HdriEnvironment`), ``rotation_deg`` optional (0). The image
+    file is relative to ``scene_dir`` and read with :func:`tracer.imageio.read_image` (float
+    files as stored, integer files sRGB-decoded); 1 channel: grey; 2: grey and alpha;
+    3: RGB; 4: RGBA; alpha is dropped.
+
+    Parameters
+    ----------
+    spec : dict
+        The parsed "environment" block.
+    scene_dir : pathlib.Path
+        The scene folder, against which the image path is resolved.
+    file : str
+        The scene file's name, for error messages.
+
+    Returns
+    -------
+    Environment
+
+    Raises
+    ------
+    SceneError
+        With field ``environment.<field>`` for an unknown type, an unknown, missing,
+        negative or non-numeric field, a black colour; with field ``environment.file`` for
+        an image that is missing, unreadable, with more than 4 channels, with negative or
+        non-finite pixels, or black with calibration "mean" or "max".
+    """
+    if not isinstance(spec, dict):
+        raise SceneError(file, "environment", f"must be an object, got {spec!r}")
+    if "type" not in spec:
+        raise SceneError(file, "environment.type", "is missing")
+    kind = spec["type"]
+    if not isinstance(kind, str) or kind not in _FIELDS:
+        raise SceneError(
+            file, "environment.type", f"unknown type {kind!r}; expected one of {list(_FIELDS)}"
+        )
+    reader = _SpecReader(spec, "environment", file, _FIELDS[kind])
+
+    if kind == "none":
+        return NoEnvironment()
+
+    if kind == "uniform":
+        L = reader.number("luminance", minimum=0.0)
+        color = spec.get("color", [1.0, 1.0, 1.0])
+        if not isinstance(color, list | tuple) or len(color) != 3:
+            raise reader.error("color", f"must be a list of 3 numbers, got {color!r}")
+        rgb = [
+            _finite_number(c, f"environment.color[{i}]", file, minimum=0.0)
+            for i, c in enumerate(color)
+        ]
+        if max(rgb) == 0.0:
+            raise reader.error("color", "must not be black")
+        return UniformEnvironment(L, rgb)
+
+    image_file = reader.required("file")
+    if not isinstance(image_file, str) or not image_file:
+        raise reader.error("file", f"must be a non-empty path, got {image_file!r}")
+    calibration = _SpecReader(
+        reader.required("calibration"), "environment.calibration", file, _CALIBRATION_FIELDS
+    )
+    mode = calibration.choice("mode", CALIBRATION_MODES)
+    value = calibration.number("value", minimum=0.0, strict=True)
+    rotation = reader.number("rotation_deg", default=0.0)
+
+    try:
+        pixels = read_image(Path(scene_dir) / image_file)
+    except ImageReadError as exc:
+        raise reader.error("file", f"cannot read {image_file!r}: {exc.reason}") from exc
+    channels = pixels.shape[2]
+    if channels > 4:
+        raise reader.error("file", f"{image_file!r} has {channels} channels; expected 1 to 4")
+    rgb = np.repeat(pixels[..., :1], 3, axis=2) if channels <= 2 else pixels[..., :3]
+    try:
+        return HdriEnvironment(rgb, mode, value, rotation, source=image_file)
+    except ValueError as exc:
+        raise reader.error("file", f"{image_file!r}: {exc}") from exc

@@ -1,0 +1,46 @@
+"""Typed errors of the tracer.
+
+Every error caused by input names the file and the field that is wrong, so that the command
+line can print one clear line and exit with status 2 (see :mod:`tracer.cli`).
+"""
+
+from __future__ import annotations
+
+
+class TracerError(Exception):
+    """Base class of every error the tracer raises on purpose."""
+
+
+class SceneError(TracerError):
+    """Bad input: a scene folder, a scene.json field, a mesh or an image.
+
+    Parameters
+    ----------
+    file : str
+        The file at fault (a path as the user gave it, or relative to the scene folder).
+    field : str
+        The JSON path of the offending field (``objects[3].material.reflectance``), or ``""``
+        when the whole file is at fault (malformed JSON, unreadable image).
+    message : str
+        What is wrong and, where it helps, what is expected.
+    """
+
+    def __init__(self, file: str, field: str, message: str):
+        self.file = str(file)
+        self.field = field
+        self.message = message
+        where = f"{self.file}: {field}" if field else self.file
+        super().__init__(f"{where}: {message}")
+
+
+class ImageReadError(TracerError):
+    """An image file could not be read (missing, unreadable or of an unsupported format)."""
+
+    def __init__(self, path: str, reason: str):
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(f"{self.path}: {reason}")
+
+
+class RenderCancelled(TracerError):
+    """Raised inside a batch loop only when a caller asked to abort without keeping results."""

@@ -1,0 +1,157 @@
+"""The observer: a thin-lens eye with a finite pupil (paper sec. 1-2, eqs. 2-3).
+
+Eye coordinates: origin at the pupil centre, x to the right, y up, z along the gaze. The pupil is a
+disk of radius ``a`` in the plane z = 0 and is also the thin lens; the retina is a plane at
+z = -f (f = ``focal_length_mm``, default 16.67 mm: the equivalent focal length of Emsley's reduced
+eye). The lens is focused at the accommodation distance s: a point at z = s images sharply on the
+retina, other points blur into a circle of angular diameter D |1/s_point - 1/s|.
+
+Retina positions are given as perceived: ``(sx, sy)`` is the point where the chief ray of a scene
+direction (sx, sy, f) meets the plane z = f, i.e. the inverted physical retina point (-sx, -sy, -f)
+turned upright. Pixel (0, 0) is top-left, as the image is seen.
+
+Apparent luminance. The retinal illuminance at a retina point p is
+``E(p) = integral over the pupil of L(x -> p) cos^2(theta) / r^2 dA_x`` (paper eq. 2 with the thin
+lens preserving luminance). The paper converts E back to luminance with L = E f^2 / (A cos^4 theta),
+the small-pupil limit of the exact view factor. Here each pixel divides its collected flux by the
+exact geometric extent ``G_pix = integral over the pixel of pi F(p) dA_p``, where F is the closed-form
+view factor from a retina element to the parallel pupil disk. A uniform surround of luminance L0
+then renders L0 in every pixel for any pupil, focus or field angle (the furnace test), and for small
+pupils the result equals the paper's relation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .scene import EyeSpec
+
+
+def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
+    """View factor from a differential area to a parallel disk (radius ``a``, distance ``h``,
+    lateral offset ``rho`` of the element from the disk axis; all mm).
+
+    F = (1/2) [1 - (h^2 + rho^2 - a^2) / sqrt((h^2 + rho^2 + a^2)^2 - 4 a^2 rho^2)]
+    (Howell, A Catalog of Radiation Heat Transfer Configuration Factors, factor B-13;
+    Modest, Radiative Heat Transfer, 3rd ed., doi:10.1016/C2010-0-65874-3, app. D).
+    """
+    rho2 = np.asarray(rho, dtype=np.float64) ** 2
+    h2, a2 = h * h, a * a
+    return 0.5 * (1.0 - (h2 + rho2 - a2) / np.sqrt((h2 + rho2 + a2) ** 2 - 4.0 * a2 * rho2))
+
+
+class ThinLensEye:
+    """Thin-lens eye built from an :class:`tracer.scene.EyeSpec` (all lengths in mm)."""
+
+    def __init__(self, spec: EyeSpec):
+        self.spec = spec
+        self.position = np.asarray(spec.position, dtype=np.float64)
+        self.gaze = spec.gaze / np.linalg.norm(spec.gaze)
+        right = np.cross(self.gaze, spec.up)
+        self.right = right / np.linalg.norm(right)
+        self.up = np.cross(self.right, self.gaze)
+        self.focal = float(spec.focal_length_mm)
+        self.pupil_radius = 0.5 * float(spec.pupil_diameter_mm)
+        self.pupil_area = math.pi * self.pupil_radius**2
+        self.accommodation = float(spec.accommodation_distance_mm)
+        self.width, self.height = spec.resolution
+        self.half_x = self.focal * math.tan(math.radians(spec.fov_deg[0]) / 2)
+        self.half_y = self.focal * math.tan(math.radians(spec.fov_deg[1]) / 2)
+        self.pixel_w = 2 * self.half_x / self.width
+        self.pixel_h = 2 * self.half_y / self.height
+        self.pixel_area = self.pixel_w * self.pixel_h
+        self.extent = self._pixel_extent()
+
+    # -- geometry ---------------------------------------------------------------------------
+    def to_local(self, v: np.ndarray) -> np.ndarray:
+        """World vectors (n, 3) to eye coordinates (n, 3)."""
+        return np.stack([v @ self.right, v @ self.up, v @ self.gaze], axis=-1)
+
+    def to_world(self, v: np.ndarray) -> np.ndarray:
+        """Eye-coordinate vectors (n, 3) to world vectors (n, 3)."""
+        return v[:, :1] * self.right + v[:, 1:2] * self.up + v[:, 2:3] * self.gaze
+
+    def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
+        """Perceived retina coordinates (sx (W,), sy (H,)) of pixel centres, mm."""
+        sx = (2 * (np.arange(self.width) + 0.5) / self.width - 1) * self.half_x
+        sy = (1 - 2 * (np.arange(self.height) + 0.5) / self.height) * self.half_y
+        return sx, sy
+
+    def pixel_of(self, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+        """Flat pixel index (row-major, top row first) of retina points; -1 outside the retina."""
+        i = np.floor((sx / self.half_x + 1) * 0.5 * self.width).astype(np.int64)
+        j = np.floor((1 - sy / self.half_y) * 0.5 * self.height).astype(np.int64)
+        inside = (i >= 0) & (i < self.width) & (j >= 0) & (j < self.height)
+        return np.where(inside, j * self.width + i, -1)
+
+    def _pixel_extent(self, order: int = 4) -> np.ndarray:
+        """G_pix (mm^2), flat (H*W,): integral of pi F over each pixel (Gauss-Legendre, order^2)."""
+        nodes, weights = np.polynomial.legendre.leggauss(order)
+        sx, sy = self.pixel_centers()
+        ox = 0.5 * self.pixel_w * nodes
+        oy = 0.5 * self.pixel_h * nodes
+        px = sx[None, :, None, None] + ox[None, None, :, None]
+        py = sy[:, None, None, None] + oy[None, None, None, :]
+        rho = np.hypot(px, py)
+        f = np.pi * disk_view_factor(rho, self.focal, self.pupil_radius)
+        w = (weights[:, None] * weights[None, :]) * 0.25 * self.pixel_area
+        return (f * w[None, None]).sum(axis=(2, 3)).reshape(-1)
+
+    # -- backward: retina -> scene -------------------------------------------------------------
+    def generate_rays(self, sx: np.ndarray, sy: np.ndarray, lens_xy: np.ndarray):
+        """Rays from pupil points toward the scene for retina points (sx, sy).
+
+        Parameters
+        ----------
+        sx, sy : (n,) perceived retina coordinates, mm.
+        lens_xy : (n, 2) pupil points in eye coordinates, mm.
+
+        Returns
+        -------
+        origins (n, 3), directions (n, 3) unit, world space; geometric factor f^2 / r^4 (n,), 1/mm^2.
+        """
+        f, s = self.focal, self.accommodation
+        if math.isinf(s):
+            d_local = np.stack([sx, sy, np.full_like(sx, f)], axis=1)
+        else:
+            q = np.stack([sx * s / f - lens_xy[:, 0], sy * s / f - lens_xy[:, 1], np.full_like(sx, s)], axis=1)
+            d_local = q
+        d_local /= np.linalg.norm(d_local, axis=1, keepdims=True)
+        origins = self.position + lens_xy[:, :1] * self.right + lens_xy[:, 1:2] * self.up
+        r2 = (lens_xy[:, 0] + sx) ** 2 + (lens_xy[:, 1] + sy) ** 2 + f * f
+        return origins, self.to_world(d_local), f * f / (r2 * r2)
+
+    # -- forward: scene -> retina ---------------------------------------------------------------
+    def pupil_hit(self, origins: np.ndarray, dirs: np.ndarray):
+        """Intersections of rays with the pupil disk from the front (travelling against the gaze).
+
+        Returns (t (n,) with inf where there is no hit, lens points (n, 2) in eye coordinates).
+        """
+        rel = origins - self.position
+        dz = dirs @ self.gaze
+        oz = rel @ self.gaze
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -oz / dz
+        ok = (dz < 0) & (oz > 0) & (t > 0)
+        hit = rel + np.where(ok, t, 0.0)[:, None] * dirs
+        lx, ly = hit @ self.right, hit @ self.up
+        ok &= lx * lx + ly * ly <= self.pupil_radius**2
+        return np.where(ok, t, np.inf), np.stack([lx, ly], axis=1)
+
+    def retina_point(self, lens_xy: np.ndarray, dirs: np.ndarray):
+        """Perceived retina coordinates (sx, sy) where the thin lens images rays (n,) that cross
+        the pupil at ``lens_xy`` travelling along world ``dirs`` (toward the eye)."""
+        dl = self.to_local(dirs)
+        f, s = self.focal, self.accommodation
+        inv_s = 0.0 if math.isinf(s) else 1.0 / s
+        sx = f * (lens_xy[:, 0] * inv_s + dl[:, 0] / dl[:, 2])
+        sy = f * (lens_xy[:, 1] * inv_s + dl[:, 1] / dl[:, 2])
+        return sx, sy
+
+    def blur_diameter_mm(self, distance_mm: float) -> float:
+        """Retinal blur-circle diameter (perceived coordinates, mm) of a point at ``distance_mm``:
+        f D |1/d - 1/s| (thin lens, geometric optics)."""
+        inv_s = 0.0 if math.isinf(self.accommodation) else 1.0 / self.accommodation
+        return self.focal * 2 * self.pupil_radius * abs(1.0 / distance_mm - inv_s)

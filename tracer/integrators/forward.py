@@ -1,0 +1,194 @@
+"""Forward stochastic ray tracing from the light sources into the eye (paper sec. 2, Fig. 3; sec. 4.2).
+
+Particles leave the emitters (an emitter triangle is chosen with probability proportional to its
+flux, a point uniformly on it, a direction from the Lambertian law) and carry flux through the
+optics. A particle that crosses the eye pupil from the front is imaged by the thin lens onto the
+retina and adds its flux to one pixel; flux over the pixel's geometric extent is the apparent
+luminance (:mod:`tracer.eye`), so forward and backward estimate the same number.
+
+The paper's directed split (sec. 2): an emitter or a scattering surface with an ``aim`` draws, with
+probability w, a direction toward its target aperture (the eye pupil where it is in direct view, an
+optical system's entrance pupil, the LCD) and otherwise from its own law. The particle's weight is
+f cos / (w p_target + (1 - w) p_own), the one-sample mixture estimator (Veach & Guibas 1995,
+doi:10.1145/218380.218498), which is unbiased for every w in [0, 1). The paper's weights
+1/(1 - w) and I_p Omega_p / (w I_s) are this estimator for a target cone excluded from the surface's
+own sampling.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..optics.surfaces import Emitter, Surface
+from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
+from ..units import MM2_TO_M2
+from .base import DEFAULT_BATCH, Integrator, register
+
+ROULETTE_DEPTH = 4
+
+
+@register
+class ForwardTracer(Integrator):
+    name = "forward"
+    summary = "sources -> optics -> pupil -> retina (paper sec. 2, directed split)"
+
+    def __init__(self, scene, seed, batch_size=DEFAULT_BATCH):
+        super().__init__(scene, seed, batch_size)
+        self.max_depth = scene.forward["max_depth"]
+        tris, slots, power = [], [], []
+        for slot, surf in enumerate(self.surfaces):
+            if not isinstance(surf, Emitter):
+                continue
+            t = self.objects[slot].triangles
+            area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+            sides = 2.0 if surf.two_sided else 1.0
+            tris.append(t)
+            slots.append(np.full(len(t), slot))
+            power.append(np.pi * surf.luminance * area * sides)  # cd/m^2 mm^2 sr = 1e-6 lm
+        self.emitter_tris = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+        self.emitter_slot = np.concatenate(slots) if slots else np.zeros(0, np.int64)
+        self.emitter_power = np.concatenate(power) if power else np.zeros(0)
+        self.total_flux_lm = float(self.emitter_power.sum() * MM2_TO_M2)
+        if self.total_flux_lm <= 0:
+            self.warnings.append("the scene has no emitter with positive flux: forward tracing has nothing to trace")
+        if not self.scene.environment.is_black:
+            self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
+                                 "method (the hybrid method of a later release merges both)")
+        self.truncated = 0
+
+    # -- emission --------------------------------------------------------------------------------
+    def emit(self, rng: np.random.Generator, n: int):
+        """Particles: origins (n, 3) mm, directions (n, 3), flux (n, 3) in cd/m^2 mm^2 sr, alive (n,)."""
+        tri, pmf = sample_discrete(self.emitter_power, rng.random(n))
+        t = self.emitter_tris[tri]
+        b = uniform_triangle(rng.random((n, 2)))
+        points = t[:, 0] * (1 - b[:, :1] - b[:, 1:]) + t[:, 1] * b[:, :1] + t[:, 2] * b[:, 1:]
+        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        normal = cross / (2 * area)[:, None]
+        slot = self.emitter_slot[tri]
+        pdf_pos = pmf / area
+        radiance = np.zeros((n, 3))
+        dirs = np.zeros((n, 3))
+        pdf_dir = np.zeros(n)
+        for s in np.unique(slot):
+            sel = np.nonzero(slot == s)[0]
+            surf: Emitter = self.surfaces[s]
+            nrm = normal[sel]
+            if surf.two_sided:
+                flip = rng.random(len(sel)) < 0.5
+                nrm = np.where(flip[:, None], -nrm, nrm)
+                pdf_pos[sel] *= 0.5
+            radiance[sel] = surf.radiance_rgb
+            d, p = self._directions(rng, surf, points[sel], nrm)
+            dirs[sel], pdf_dir[sel] = d, p
+            normal[sel] = nrm
+        cos = np.einsum("ij,ij->i", dirs, normal)
+        alive = (cos > 0) & (pdf_dir > 0)
+        flux = np.where(alive[:, None], radiance * (cos / np.where(alive, pdf_pos * pdf_dir, 1.0))[:, None], 0.0)
+        origins = self.accel.spawn(points, normal, dirs) if self.accel else points
+        return origins, dirs, flux, alive
+
+    def _directions(self, rng, surf: Surface, points: np.ndarray, normal: np.ndarray):
+        """Directions (m, 3) and their solid-angle pdf (m,) from the Lambertian law, mixed with the
+        emitter's aim target when it has one."""
+        m = len(points)
+        t, b, nn = frame_from_normal(normal)
+        d = to_world(cosine_hemisphere(rng.random((m, 2))), t, b, nn)
+        aim = surf.obj.material.aim
+        if aim is None or aim.share == 0:
+            return d, np.maximum(np.einsum("ij,ij->i", d, normal), 0.0) / np.pi
+        d, _, p_t = self._directed_split(aim, points, d, rng)
+        p_cos = np.maximum(np.einsum("ij,ij->i", d, normal), 0.0) / np.pi
+        return d, aim.share * p_t + (1 - aim.share) * p_cos
+
+    def _directed_split(self, aim, origins: np.ndarray, d_own: np.ndarray, rng):
+        """Replace a share ``aim.share`` of the directions ``d_own`` (m, 3) by directions toward
+        (or, for mode "away", from) the aim target. Returns (directions, aimed (m,) bool, target pdf
+        per sr of every returned direction (m,))."""
+        m = len(origins)
+        target = self.target(aim.target)
+        sign = -1.0 if aim.mode == "away" else 1.0
+        aimed = rng.random(m) < aim.share
+        d_t, p_t = target.sample(origins, rng.random((m, 3)))
+        d = np.where(aimed[:, None], sign * d_t, d_own)
+        own = ~aimed
+        p_t[own] = target.pdf(origins[own], sign * d[own])
+        return d, aimed, p_t
+
+    # -- transport -------------------------------------------------------------------------------
+    def _scatter_aimed(self, surf: Surface, it, rng):
+        """Directed split at a scattering surface: one-sample mixture of the surface's own sampling
+        and sampling toward its target. Returns (directions, weight factor (m, 3), alive)."""
+        aim = surf.obj.material.aim
+        d_own, factor, alive = surf.scatter(it, rng, radiance=False)
+        if aim is None or aim.share == 0:
+            return d_own, factor, alive
+        d, aimed, p_t = self._directed_split(aim, it.p, d_own, rng)
+        mix = aim.share * p_t + (1 - aim.share) * surf.pdf(it, d)
+        fcos = surf.eval_fcos(it, d)
+        ok = np.where(aimed, p_t > 0, alive) & (mix > 0)
+        weight = np.where(ok[:, None], fcos / np.where(ok, mix, 1.0)[:, None], 0.0)
+        return d, weight, ok & (weight.max(axis=1) > 0)
+
+    def run_batch(self, rng, film):
+        n = self.batch_size
+        if self.total_flux_lm <= 0 or self.accel is None:
+            film.samples += n
+            return n, 0
+        eye = self.eye
+        origins, dirs, flux, alive = self.emit(rng, n)
+        keep = np.nonzero(alive)[0]
+        origins, dirs, flux = origins[keep], dirs[keep], flux[keep]
+        flux0 = flux.max(axis=1)
+        found = 0
+        for depth in range(self.max_depth):
+            if len(flux) == 0:
+                break
+            t_eye, lens = eye.pupil_hit(origins, dirs)
+            hits = self.accel.intersect(origins, dirs)
+            at_eye = t_eye < hits.t
+            if np.any(at_eye):
+                sx, sy = eye.retina_point(lens[at_eye], dirs[at_eye])
+                pix = eye.pixel_of(sx, sy)
+                ok = pix >= 0
+                found += int(ok.sum())
+                film.add(pix[ok], flux[at_eye][ok] / eye.extent[pix[ok]][:, None])
+            hit = hits.hit & ~at_eye
+            next_o, next_d, next_f, next_0 = [], [], [], []
+            for slot in np.unique(hits.obj[hit]):
+                sel = np.nonzero(hit & (hits.obj == slot))[0]
+                surf = self.surfaces[slot]
+                if surf.terminal:
+                    continue
+                it = self.interaction(slot, hits, sel, dirs)
+                if surf.scattering:
+                    d_out, factor, ok = self._scatter_aimed(surf, it, rng)
+                else:
+                    d_out, factor, ok = surf.scatter(it, rng, radiance=False)
+                f_new = flux[sel] * factor
+                ok &= f_new.max(axis=1) > 0
+                if depth >= ROULETTE_DEPTH:
+                    q = np.clip(f_new.max(axis=1) / flux0[sel], 0.0, 1.0)
+                    ok &= rng.random(len(sel)) < q
+                    f_new = f_new / np.where(ok, q, 1.0)[:, None]
+                k = np.nonzero(ok)[0]
+                next_o.append(self.accel.spawn(it.p[k], it.ng[k], d_out[k]))
+                next_d.append(d_out[k])
+                next_f.append(f_new[k])
+                next_0.append(flux0[sel[k]])
+            if not next_o:
+                flux = np.zeros((0, 3))
+                break
+            origins, dirs = np.concatenate(next_o), np.concatenate(next_d)
+            flux, flux0 = np.concatenate(next_f), np.concatenate(next_0)
+        self.truncated += len(flux)
+        film.samples += n
+        return n, found
+
+    def finish(self, result):
+        super().finish(result)
+        result.extra["emitted_flux_lm"] = self.total_flux_lm
+        if result.paths and self.truncated / result.paths > 1e-3:
+            result.warnings.append(f"{self.truncated:,} particles were cut at forward.max_depth = {self.max_depth}: "
+                                   "the image is biased low; raise max_depth")

@@ -1,0 +1,51 @@
+"""Specular laws: reflection, refraction and Fresnel reflectance of a dielectric interface.
+
+Fresnel equations for unpolarised light, R = (R_s + R_p) / 2 with
+r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), r_p = (n2 cos_i - n1 cos_t) / (n2 cos_i + n1 cos_t)
+(Born & Wolf, Principles of Optics, 7th ed., sec. 1.5.2, doi:10.1017/CBO9781139644181).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot product of (n, 3) arrays."""
+    return np.einsum("ij,ij->i", a, b)
+
+
+def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror direction of ``d`` (n, 3) about normals ``n`` (n, 3); either side of the normal."""
+    return d - 2.0 * dot(d, n)[:, None] * n
+
+
+def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
+    """Reflectance of a dielectric interface for unpolarised light.
+
+    Parameters
+    ----------
+    cos_i : (n,) cosine of the angle of incidence, in [0, 1].
+    eta : n_t / n_i, scalar or (n,).
+
+    Returns
+    -------
+    R : (n,) reflectance (1 under total internal reflection).
+    cos_t : (n,) cosine of the refraction angle (0 under total internal reflection).
+    """
+    cos_i = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - cos_i**2) / np.square(eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    r = 0.5 * (rs * rs + rp * rp)
+    return np.where(tir, 1.0, r), np.where(tir, 0.0, cos_t)
+
+
+def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray | float, cos_i: np.ndarray, cos_t: np.ndarray) -> np.ndarray:
+    """Refracted direction (Snell) of unit ``d`` through a surface whose unit normal ``n`` faces the
+    incident side (d . n = -cos_i); eta = n_t / n_i."""
+    eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
+    t = d / eta[:, None] + (cos_i / eta - cos_t)[:, None] * n
+    return t / np.linalg.norm(t, axis=1, keepdims=True)

@@ -1,0 +1,202 @@
+"""One render, start to finish: scene folder -> integrator -> image.exr, preview.png, report.json.
+
+Output folder (written only after the render succeeded; files land atomically):
+
+- image.exr: float32 channels R, G, B (apparent luminance, linear Rec.709, Y in cd/m^2), Y, and Y_var
+  (variance of each pixel's Y estimate, (cd/m^2)^2); header metadata hud:method, hud:rays, ...
+- preview.png: sRGB preview for an eye adapted to the view's log-average luminance (Ward 1994).
+- report.json: the figures of :func:`build_report`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .analysis import specular_paths
+from .imageio import write_exr, write_png
+from .integrators import INTEGRATORS, Budget, RenderResult
+from .scene import Scene, load_scene
+from .tonemap import log_average_luminance, tonemap_ward
+from .units import Y_WEIGHTS
+
+
+def _erode(mask: np.ndarray) -> np.ndarray:
+    """Binary erosion with the 3 x 3 cross on a 2D grid (borders count as outside)."""
+    m = np.pad(mask, 1, constant_values=False)
+    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
+
+
+def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
+    """Mean rendered Y over flat pixel indices and its standard error (independent pixels)."""
+    k = len(idx)
+    return {"pixels": int(k), "rendered_cd_m2": float(y[idx].mean()),
+            "standard_error_cd_m2": float(math.sqrt(var[idx].sum()) / k)}
+
+
+def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]:
+    """Integer shift (dy, dx) that best overlays boolean grid ``b`` on ``a``."""
+    best, arg = -1, (0, 0)
+    for dy in range(-max_shift, max_shift + 1):
+        for dx in range(-max_shift, max_shift + 1):
+            score = int((a & np.roll(np.roll(b, dy, 0), dx, 1)).sum())
+            if score > best:
+                best, arg = score, (dy, dx)
+    return arg
+
+
+def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> dict:
+    """Compare the render with the brightness-theorem prediction of :mod:`tracer.analysis`.
+
+    Masks come from the dominant chain: "symbol" where its LCD cell is clear, "background" where
+    it is black (both eroded by one grid cell, so edges blurred by the pupil are left out).
+    """
+    res = specular_paths(integrator)
+    grid_h, grid_w = res["grid"]
+    pixels = res["pixels"]
+    npts = len(pixels)
+    total = np.zeros(npts)
+    per_path = []
+    for p in res["paths"]:
+        y = p["luminance"] @ Y_WEIGHTS
+        np.add.at(total, p["pixel"], y)
+        per_path.append(y)
+    out: dict = {
+        "method": "chief ray through every specular branch; scattering surfaces lit directly by the emitters "
+                  "(deterministic quadrature); luminance = product of R and T along the chain x luminance behind it",
+        "grid_stride_px": res["stride"],
+        "paths": [],
+    }
+    y_img = image_y.reshape(-1)
+    v_img = var_y.reshape(-1)
+    for p, y in zip(res["paths"][:8], per_path[:8]):
+        out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / npts),
+                             "predicted_mean_cd_m2": float(y.mean()), "transfer_factor_mean": float(p["factor"].mean())})
+    lcd_paths = [(p, y) for p, y in zip(res["paths"], per_path) if np.any(np.isfinite(p["lcd"]))]
+    if not lcd_paths:
+        return out
+    main, main_y = lcd_paths[0]
+    grid_lcd = np.full(npts, np.nan)
+    grid_lcd[main["pixel"]] = main["lcd"]
+    grid_lcd = grid_lcd.reshape(grid_h, grid_w)
+    symbol = _erode(grid_lcd >= 0.5)
+    background = _erode(grid_lcd < 0.5)  # NaN compares False: outside the LCD is neither
+    lcd_obj = next(s for s in integrator.surfaces if s.kind == "lcd")
+    cr = lcd_obj.contrast
+    sections = {}
+    for key, mask in (("symbol", symbol), ("background", background)):
+        idx = np.nonzero(mask.ravel())[0]
+        if len(idx) == 0:
+            continue
+        entry = _mask_stats(y_img, v_img, pixels[idx])
+        entry["predicted_cd_m2"] = float(total[idx].mean())
+        contrib = {}
+        for p, y in lcd_paths[:3]:
+            grid = np.zeros(npts)
+            np.add.at(grid, p["pixel"], y)
+            contrib[p["path"]] = float(grid[idx].mean())
+        entry["predicted_by_path_cd_m2"] = contrib
+        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / entry["predicted_cd_m2"] if entry["predicted_cd_m2"] > 0 else None
+        sections[key] = entry
+    out.update(sections)
+    out["lcd_contrast_ratio"] = cr
+    if "symbol" in sections and "background" in sections:
+        out["symbol_over_contrast_ratio_cd_m2"] = sections["symbol"]["rendered_cd_m2"] / cr
+        out["rendered_contrast"] = (sections["symbol"]["rendered_cd_m2"] / sections["background"]["rendered_cd_m2"]
+                                    if sections["background"]["rendered_cd_m2"] > 0 else None)
+    if len(lcd_paths) > 1:
+        ghost, ghost_y = lcd_paths[1]
+        g_lcd = np.full(npts, np.nan)
+        g_lcd[ghost["pixel"]] = ghost["lcd"]
+        g_open = (g_lcd >= 0.5).reshape(grid_h, grid_w)
+        dy, dx = _shift(grid_lcd >= 0.5, g_open)
+        eye = integrator.eye
+        px_mrad = 1000 * 2 * math.atan(eye.half_x / eye.focal) / eye.width
+        g_idx = np.nonzero(g_lcd >= 0.5)[0]
+        m_idx = np.nonzero(grid_lcd.ravel() >= 0.5)[0]
+        out["ghost"] = {
+            "path": ghost["path"],
+            "predicted_cd_m2": float(np.mean(ghost_y[np.isin(ghost["pixel"], g_idx)])) if len(g_idx) else 0.0,
+            "ratio_to_symbol": (float(np.mean(ghost_y[np.isin(ghost["pixel"], g_idx)]) /
+                                np.mean(main_y[np.isin(main["pixel"], m_idx)])) if len(g_idx) and len(m_idx) else None,
+            "offset_px": [-dx * res["stride"], -dy * res["stride"]],
+            "offset_mrad": float(math.hypot(dx, dy) * res["stride"] * px_mrad),
+        }
+    return out
+
+
+def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
+                 budget: Budget, analysis: dict | None) -> dict:
+    y = image @ Y_WEIGHTS
+    rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
+    lit = y > 1e-6 * max(float(y.max()), 1e-300)
+    return {
+        "tracer": f"hud-tracer {__version__}",
+        "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
+        "method": result.method,
+        "seed": result.seed,
+        "budget": {"rays": budget.rays, "seconds": budget.seconds},
+        "partial": result.partial,
+        "rays": result.rays,
+        "paths": result.paths,
+        "paths_found_light": result.found,
+        "batches": result.batches,
+        "seconds": result.seconds,
+        "rays_per_second": result.rays_per_second,
+        "efficiency": result.efficiency,
+        "efficiency_definition": ("particles that reached the retina / particles emitted" if result.method == "forward"
+                                  else "retina samples whose path reached a source or a lit environment / samples"),
+        "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
+                      "log_average": log_average_luminance(y)},
+        "adaptation_luminance": preview_info["adaptation_luminance"],
+        "noise": {"median_relative_standard_error_lit_pixels": float(np.median(rel_err[lit])) if lit.any() else None},
+        "preview": preview_info,
+        "image": {"width": image.shape[1], "height": image.shape[0],
+                  "channels": ["R", "G", "B", "Y", "Y_var"],
+                  "pixel_mrad": [1000 * 2 * math.atan(math.tan(math.radians(scene.eye.fov_deg[i]) / 2)) /
+                                 scene.eye.resolution[i] for i in range(2)]},
+        "warnings": result.warnings,
+        "method_details": result.extra,
+        "brightness_theorem": analysis,
+    }
+
+
+def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
+                 progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True):
+    """Render ``scene`` with ``method`` into ``out_dir``; returns (report dict, RenderResult)."""
+    if method not in INTEGRATORS:
+        raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
+    kwargs = {"batch_size": batch_size} if batch_size else {}
+    integrator = INTEGRATORS[method](scene, seed, **kwargs)
+    result = integrator.render(budget, progress, should_stop)
+    image = result.film.rgb()
+    var_y = result.film.variance_y()
+    if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
+        raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
+    y = image @ Y_WEIGHTS
+    preview, info = tonemap_ward(image)
+    analysis = brightness_theorem(integrator, y, var_y) if analyse and integrator.accel is not None else None
+    report = build_report(scene, result, image, var_y, info, budget, analysis)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
+             "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency), "hud:seed": str(seed),
+             "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
+             "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); Y_var: (cd/m^2)^2"}
+    write_exr(out / "image.exr", {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y},
+              attrs)
+    write_png(out / "preview.png", preview)
+    tmp = out / f".report.json.{os.getpid()}"
+    tmp.write_text(json.dumps(report, indent=2) + "\n")
+    os.replace(tmp, out / "report.json")
+    return report, result
+
+
+def render_folder(scene_dir, method, budget, seed, out_dir, **kw):
+    """Load a scene folder and render it (see :func:`render_scene`)."""
+    return render_scene(load_scene(scene_dir), method, budget, seed, out_dir, **kw)
