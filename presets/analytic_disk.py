@@ -35,8 +35,8 @@ def write(folder, resolution=(15, 15)) -> Path:
                                             "aim": {"target": "eye", "share": 0.5}})
     sb.add("disk", disk(RADIUS, 256), {"type": "emitter", "luminance": L},
            frame_matrix([0, 0, HEIGHT], [1, 0, 0], [0, 0, -1]))
-    # The eye looks at the foot (origin) from 60 deg elevation, 400 mm away, beside the disk.
-    el = math.radians(60)
+    # The eye looks at the foot (origin) from 50 deg elevation, 400 mm away, beside the disk.
+    el = math.radians(50)
     pos = np.array([0.0, -400 * math.cos(el), 400 * math.sin(el)])
     gaze = -pos / np.linalg.norm(pos)
     return sb.write(eye={"position": pos.tolist(), "gaze": gaze.tolist(), "up": [0, 0, 1],

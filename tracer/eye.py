@@ -10,14 +10,16 @@ Retina positions are given as perceived: ``(sx, sy)`` is the point where the chi
 direction (sx, sy, f) meets the plane z = f, i.e. the inverted physical retina point (-sx, -sy, -f)
 turned upright. Pixel (0, 0) is top-left, as the image is seen.
 
-Apparent luminance. The retinal illuminance at a retina point p is
-``E(p) = integral over the pupil of L(x -> p) cos^2(theta) / r^2 dA_x`` (paper eq. 2 with the thin
-lens preserving luminance). The paper converts E back to luminance with L = E f^2 / (A cos^4 theta),
-the small-pupil limit of the exact view factor. Here each pixel divides its collected flux by the
-exact geometric extent ``G_pix = integral over the pixel of pi F(p) dA_p``, where F is the closed-form
-view factor from a retina element to the parallel pupil disk. A uniform surround of luminance L0
-then renders L0 in every pixel for any pupil, focus or field angle (the furnace test), and for small
-pupils the result equals the paper's relation.
+Apparent luminance. The lens is ideal and lossless: the flux L cos(theta) dOmega dA that crosses
+the pupil at x along a scene direction of angle theta to the axis lands, by the lens mapping
+p = f (x / s + tan theta), on the retina area f^2 dOmega / cos^3(theta). The retinal illuminance is
+therefore ``E(p) = integral over the pupil of L(x, p) cos^4(theta(x, p)) / f^2 dA_x`` (paper eq. 2),
+where theta is the angle of the scene-side ray from x toward the point of the accommodation plane
+that images at p. At infinite focus this is the paper's relation L = E f^2 / (A cos^4 theta). Each
+pixel divides its flux by its exact extent ``G_pix = integral over the pixel and the pupil of
+cos^4 theta / f^2``, which has a closed form through the view factor of a disk (:func:`disk_view_factor`),
+so a uniform surround of luminance L0 renders L0 in every pixel for any pupil, focus or field angle
+(the furnace test), and forward and backward tracing estimate the same number.
 """
 
 from __future__ import annotations
@@ -87,15 +89,22 @@ class ThinLensEye:
         return np.where(inside, j * self.width + i, -1)
 
     def _pixel_extent(self, order: int = 4) -> np.ndarray:
-        """G_pix (mm^2), flat (H*W,): integral of pi F over each pixel (Gauss-Legendre, order^2)."""
+        """G_pix (mm^2), flat (H*W,): the pixel integral (Gauss-Legendre, order^2) of the pupil
+        integral of cos^4(theta) / f^2, which is (s/f)^2 pi F(s |p| / f; s, a) at accommodation
+        distance s (the rays from the pupil converge to the point s p / f of the accommodation plane)
+        and A cos^4(theta_p) / f^2 at infinity."""
         nodes, weights = np.polynomial.legendre.leggauss(order)
         sx, sy = self.pixel_centers()
         ox = 0.5 * self.pixel_w * nodes
         oy = 0.5 * self.pixel_h * nodes
         px = sx[None, :, None, None] + ox[None, None, :, None]
         py = sy[:, None, None, None] + oy[None, None, None, :]
-        rho = np.hypot(px, py)
-        f = np.pi * disk_view_factor(rho, self.focal, self.pupil_radius)
+        tan2 = (px**2 + py**2) / self.focal**2
+        s = self.accommodation
+        if math.isinf(s):
+            f = self.pupil_area / (self.focal**2 * (1 + tan2) ** 2)
+        else:
+            f = (s / self.focal) ** 2 * np.pi * disk_view_factor(s * np.sqrt(tan2), s, self.pupil_radius)
         w = (weights[:, None] * weights[None, :]) * 0.25 * self.pixel_area
         return (f * w[None, None]).sum(axis=(2, 3)).reshape(-1)
 
@@ -110,7 +119,7 @@ class ThinLensEye:
 
         Returns
         -------
-        origins (n, 3), directions (n, 3) unit, world space; geometric factor f^2 / r^4 (n,), 1/mm^2.
+        origins (n, 3), directions (n, 3) unit, world space; cos^4(theta) / f^2 (n,), 1/mm^2.
         """
         f, s = self.focal, self.accommodation
         if math.isinf(s):
@@ -120,8 +129,7 @@ class ThinLensEye:
             d_local = q
         d_local /= np.linalg.norm(d_local, axis=1, keepdims=True)
         origins = self.position + lens_xy[:, :1] * self.right + lens_xy[:, 1:2] * self.up
-        r2 = (lens_xy[:, 0] + sx) ** 2 + (lens_xy[:, 1] + sy) ** 2 + f * f
-        return origins, self.to_world(d_local), f * f / (r2 * r2)
+        return origins, self.to_world(d_local), d_local[:, 2] ** 4 / (f * f)
 
     # -- forward: scene -> retina ---------------------------------------------------------------
     def pupil_hit(self, origins: np.ndarray, dirs: np.ndarray):

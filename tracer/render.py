@@ -119,11 +119,14 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
         px_mrad = 1000 * 2 * math.atan(eye.half_x / eye.focal) / eye.width
         g_idx = np.nonzero(g_lcd >= 0.5)[0]
         m_idx = np.nonzero(grid_lcd.ravel() >= 0.5)[0]
+        g_sel = np.isin(ghost["pixel"], np.nonzero(g_lcd >= 0.5)[0])
+        m_sel = np.isin(main["pixel"], np.nonzero(grid_lcd.ravel() >= 0.5)[0])
+        g_mean = float(ghost_y[g_sel].mean()) if g_sel.any() else 0.0
+        m_mean = float(main_y[m_sel].mean()) if m_sel.any() else 0.0
         out["ghost"] = {
             "path": ghost["path"],
-            "predicted_cd_m2": float(np.mean(ghost_y[np.isin(ghost["pixel"], g_idx)])) if len(g_idx) else 0.0,
-            "ratio_to_symbol": (float(np.mean(ghost_y[np.isin(ghost["pixel"], g_idx)]) /
-                                np.mean(main_y[np.isin(main["pixel"], m_idx)])) if len(g_idx) and len(m_idx) else None,
+            "predicted_cd_m2": g_mean,
+            "ratio_to_symbol": g_mean / m_mean if m_mean > 0 else None,
             "offset_px": [-dx * res["stride"], -dy * res["stride"]],
             "offset_mrad": float(math.hypot(dx, dy) * res["stride"] * px_mrad),
         }
