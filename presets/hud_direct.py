@@ -147,8 +147,10 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
            {"type": "diffuser", "transmittance": 0.9, "sigma_deg": list(SCATTER_SIGMA_DEG),
             "aim": {"target": "pupil_image", "share": 0.8, "mode": "away"}},
            frame_matrix(scat_center, x_axis, -r2))
-    # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED.
-    sb.add("pupil_image", disk(1.5 * pupil_image_r, 64), {"type": "aperture"},
+    # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED, widened by
+    # the image of the ghost path's pupil (the outer surface mirrors the eye a few mm deeper) so that the
+    # ghost's light is aimed as well.
+    sb.add("pupil_image", disk(pupil_image_r + 2.5, 64), {"type": "aperture"},
            frame_matrix(d["led"] - 0.01 * r2, x_axis, -r2))
     # LED dies facing the scatterer, aimed at it.
     for k, dx in enumerate((-LED_PITCH, 0.0, LED_PITCH)):

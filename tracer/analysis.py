@@ -69,10 +69,10 @@ def _scattered_luminance(integrator, surf, it: Interaction, quad) -> np.ndarray:
         v = qp[k] - it.p
         dist = np.linalg.norm(v, axis=1)
         w_in = -v / dist[:, None]  # light travels from the emitter point to the surface
-        cos_e = -(w_in @ qn[k])
+        cos_e = w_in @ qn[k]
         visible_side = (cos_e > 0) | q2[k]
         origin = integrator.accel.spawn(it.p, it.ng, -w_in)
-        blocked = integrator.accel.intersect(origin, -w_in, tmax=dist * (1 - 1e-7)).hit
+        blocked = integrator.accel.intersect(origin, -w_in, tmax=dist * (1 - 1e-5) - 1e-2).hit
         light = Interaction(w_in, it.p, it.ng, it.ns, it.uv)
         cos_o = np.abs(np.einsum("ij,ij->i", to_eye, it.ng))
         f = surf.eval_fcos(light, to_eye) / np.maximum(cos_o, 1e-12)[:, None]
