@@ -129,7 +129,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
     img_rel = "textures/slide.png"
     slide_image(sb.folder / img_rel)
     lcd_v, lcd_f, lcd_uv = rectangle(w_lcd, h_lcd)
-    lcd_frame = frame_matrix(d["lcd_center"], -x_axis, -r2)
+    lcd_frame = frame_matrix(d["lcd_center"], x_axis, -r2)
     sb.add("lcd", (lcd_v, lcd_f), {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE,
                                    "contrast_ratio": CONTRAST}, lcd_frame, uv=lcd_uv)
     # Opaque frame around the LCD (four bars) so no unmodulated light passes beside it.

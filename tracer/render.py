@@ -85,7 +85,14 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
     grid_lcd[main["pixel"]] = main["lcd"]
     grid_lcd = grid_lcd.reshape(grid_h, grid_w)
     symbol = _erode(grid_lcd >= 0.5)
-    background = _erode(grid_lcd < 0.5)  # NaN compares False: outside the LCD is neither
+    # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
+    # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
+    background = grid_lcd < 0.5
+    for p, _ in lcd_paths[1:2]:
+        other = np.full(npts, np.nan)
+        other[p["pixel"]] = p["lcd"]
+        background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
+    background = _erode(background)
     lcd_obj = next(s for s in integrator.surfaces if s.kind == "lcd")
     cr = lcd_obj.contrast
     sections = {}

@@ -21,10 +21,8 @@ import numpy as np
 
 from ..sampling import uniform_disk_concentric
 from ..units import Y_WEIGHTS
-from .base import DEFAULT_BATCH, Integrator, register
+from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
-#: Depth from which Russian roulette may end low-weight paths.
-ROULETTE_DEPTH = 4
 
 
 def circle_overlap_area(r1: float, r2: float, d: float) -> float:
@@ -121,7 +119,7 @@ class BackwardTracer(Integrator):
                 t_new = thr[sel] * factor
                 alive &= t_new.max(axis=1) > 0
                 if depth >= ROULETTE_DEPTH:
-                    q = np.clip(t_new.max(axis=1), 0.0, 1.0)
+                    q = np.clip(t_new.max(axis=1) / ROULETTE_WEIGHT, 0.0, 1.0)
                     survive = rng.random(len(sel)) < q
                     alive &= survive
                     t_new = t_new / np.where(alive, q, 1.0)[:, None]

@@ -26,6 +26,13 @@ from ..units import Y_WEIGHTS
 #: Rays per batch (structure of arrays, one Embree call per bounce).
 DEFAULT_BATCH = 1 << 17
 
+#: Russian roulette (Arvo & Kirk 1990, doi:10.1145/97880.97886) starts at this depth and only for
+#: paths whose weight fell below this fraction of where it started, surviving with probability
+#: weight / ROULETTE_WEIGHT. A plain "survive with the weight" rule would turn the LCD's 5 %
+#: transmission into 20x fireflies on every later windshield bounce (the ghost image).
+ROULETTE_DEPTH = 6
+ROULETTE_WEIGHT = 1e-5
+
 Progress = Callable[[float, str], None]
 ShouldStop = Callable[[], bool]
 

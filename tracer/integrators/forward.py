@@ -22,9 +22,8 @@ import numpy as np
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
-from .base import DEFAULT_BATCH, Integrator, register
+from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
-ROULETTE_DEPTH = 4
 
 
 @register
@@ -169,7 +168,7 @@ class ForwardTracer(Integrator):
                 f_new = flux[sel] * factor
                 ok &= f_new.max(axis=1) > 0
                 if depth >= ROULETTE_DEPTH:
-                    q = np.clip(f_new.max(axis=1) / flux0[sel], 0.0, 1.0)
+                    q = np.clip(f_new.max(axis=1) / flux0[sel] / ROULETTE_WEIGHT, 0.0, 1.0)
                     ok &= rng.random(len(sel)) < q
                     f_new = f_new / np.where(ok, q, 1.0)[:, None]
                 k = np.nonzero(ok)[0]
