@@ -95,8 +95,13 @@ class BackwardTracer(Integrator):
         radiance = np.zeros((n, 3))
         found = np.zeros(n, bool)
         idx = np.arange(n)
+        if accel is None:  # nothing but the environment
+            self.rays_without_geometry += n
+            radiance += thr * env.radiance(dirs)
+            found |= radiance @ Y_WEIGHTS > 0
+            idx = idx[:0]
         for depth in range(self.max_depth):
-            if len(idx) == 0 or accel is None:
+            if len(idx) == 0:
                 break
             hits = accel.intersect(origins, dirs)
             miss = ~hits.hit

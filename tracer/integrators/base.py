@@ -154,6 +154,7 @@ class Integrator:
         self.surfaces: list[Surface] = [make_surface(o) for o in self.objects]
         self.accel = Accelerator([(o.vertices, o.faces) for o in self.objects]) if self.objects else None
         self.warnings: list[str] = []
+        self.rays_without_geometry = 0  # rays of a scene with no geometry: they all escape
         self._targets: dict[str, DiskTarget | MeshTarget] = {}
 
     # -- helpers shared by the methods ---------------------------------------------------------
@@ -188,7 +189,7 @@ class Integrator:
 
     @property
     def rays_traced(self) -> int:
-        n = self.accel.rays_traced if self.accel else 0
+        n = self.accel.rays_traced if self.accel else self.rays_without_geometry
         return n + sum(t._accel.rays_traced for t in self._targets.values() if isinstance(t, MeshTarget))
 
     # -- the batch loop ----------------------------------------------------------------------------

@@ -1,0 +1,107 @@
+"""The command line: renders, reports, failure behaviour and bad input (file and field named,
+exit status 2, no partial output)."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, edit_json, render
+
+from tracer.imageio import read_exr_channels
+
+
+def hud_trace(*args):
+    return subprocess.run([sys.executable, "-m", "tracer.cli", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_presets_listed_and_exported(tmp_path):
+    out = hud_trace("presets")
+    assert out.returncode == 0
+    names = [line.split()[0] for line in out.stdout.splitlines()]
+    assert names == ["hud-direct", "analytic-mirror", "analytic-disk", "analytic-furnace"]
+    assert hud_trace("export", "hud-direct", tmp_path / "s").returncode == 0
+    assert (tmp_path / "s" / "scene.json").is_file() and (tmp_path / "s" / "textures" / "slide.png").is_file()
+
+
+def test_render_hud_direct_writes_image_preview_report(tmp_path):
+    out = tmp_path / "o"
+    res = hud_trace("render", "hud-direct", "--method", "forward", "--rays", 3_000_000, "--seed", 7, "--out", out)
+    assert res.returncode == 0, res.stderr
+    report = json.loads((out / "report.json").read_text())
+    for key in ("method", "seed", "rays", "paths", "seconds", "rays_per_second", "efficiency", "luminance",
+                "adaptation_luminance", "warnings"):
+        assert key in report
+    assert report["rays"] >= 3_000_000 and 0 < report["efficiency"] < 1
+    assert set(report["luminance"]) >= {"mean", "max", "log_average"}
+    ch, attrs = read_exr_channels(out / "image.exr")
+    assert set(ch) == {"R", "G", "B", "Y", "Y_var"}
+    y = 0.2126 * ch["R"] + 0.7152 * ch["G"] + 0.0722 * ch["B"]
+    np.testing.assert_allclose(ch["Y"], y, rtol=1e-5, atol=1e-6)
+    assert all(np.all(np.isfinite(c)) for c in ch.values())
+    assert attrs["hud:method"] == "forward" and attrs["hud:seed"] == "7"
+    bt = report["brightness_theorem"]
+    # The symbols follow the brightness theorem; the black leak is symbol / 300 (plus ghost spill).
+    assert bt["symbol"]["predicted_cd_m2"] > 0
+    assert abs(bt["symbol"]["rendered_cd_m2"] - bt["symbol"]["predicted_cd_m2"]) < 4.5 * bt["symbol"]["standard_error_cd_m2"]
+    assert "ghost" in bt and bt["ghost"]["ratio_to_symbol"] > 0.3
+    assert (out / "preview.png").is_file()
+
+
+def test_same_seed_same_image_and_seeds_differ_by_their_variance(preset):
+    folder = preset("analytic-mirror", resolution=(16, 12))
+    y1, v1, _ = render(folder, "forward", 600_000, seed=11)
+    y2, _, _ = render(folder, "forward", 600_000, seed=11)
+    y3, v3, _ = render(folder, "forward", 600_000, seed=12)
+    assert np.array_equal(y1, y2)
+    lit = (v1 > 0) & (v3 > 0)
+    z = (y1 - y3)[lit] / np.sqrt(v1 + v3)[lit]
+    assert not np.array_equal(y1, y3)
+    assert abs(z.mean()) < 4 / math.sqrt(lit.sum()) and 0.7 < z.std() < 1.3
+
+
+def test_no_light_is_reported_not_silent(tmp_path, preset):
+    folder = preset("analytic-mirror")
+    edit_json(folder, lambda d: d["objects"][2]["material"].update(luminance=0.0))
+    out = tmp_path / "o"
+    res = hud_trace("render", folder, "--method", "backward", "--rays", 200_000, "--out", out, "--quiet")
+    assert res.returncode == 3
+    assert "no light path found" in res.stderr and "efficiency 0" in res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["efficiency"] == 0 and any("no light path found" in w for w in report["warnings"])
+    ch, _ = read_exr_channels(out / "image.exr")
+    assert all(np.all(np.isfinite(c)) for c in ch.values())
+
+
+BAD = {
+    "malformed_json": (lambda p: (p / "scene.json").write_text("{ not json"), ""),
+    "missing_mesh": (lambda p: edit_json(p, lambda d: d["objects"][0].update(mesh="meshes/nope.obj")), "objects[0].mesh"),
+    "missing_texture": (lambda p: edit_json(p, lambda d: d["objects"][2]["material"].update(image="textures/nope.png")),
+                        "objects[2].material.image"),
+    "negative_luminance": (lambda p: edit_json(p, lambda d: d["objects"][-2]["material"].update(luminance=-5)),
+                           "material.luminance"),
+    "zero_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=0)), "eye.pupil_diameter_mm"),
+    "negative_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=-4)), "eye.pupil_diameter_mm"),
+    "unknown_material": (lambda p: edit_json(p, lambda d: d["objects"][1]["material"].update(type="unobtainium")),
+                         "objects[1].material.type"),
+    "degenerate_transform": (lambda p: edit_json(p, lambda d: d["objects"][1].update(
+        transform={"scale": [1, 0, 1]})), "objects[1].transform"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_names_file_and_field_and_writes_nothing(tmp_path, case):
+    folder = tmp_path / "scene"
+    assert hud_trace("export", "hud-direct", folder).returncode == 0
+    spoil, field = BAD[case]
+    spoil(folder)
+    out = tmp_path / "out"
+    res = hud_trace("render", folder, "--method", "forward", "--rays", 1000, "--out", out, "--quiet")
+    assert res.returncode == 2, res.stderr
+    assert "scene.json" in res.stderr and field in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not out.exists()
