@@ -147,11 +147,16 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
            {"type": "diffuser", "transmittance": 0.9, "sigma_deg": list(SCATTER_SIGMA_DEG),
             "aim": {"target": "pupil_image", "share": 0.8, "mode": "away"}},
            frame_matrix(scat_center, x_axis, -r2))
-    # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED, widened by
-    # the image of the ghost path's pupil (the outer surface mirrors the eye a few mm deeper) so that the
-    # ghost's light is aimed as well.
-    sb.add("pupil_image", disk(pupil_image_r + 2.5, 64), {"type": "aperture"},
-           frame_matrix(d["led"] - 0.01 * r2, x_axis, -r2))
+    # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED. The ghost
+    # path (outer windshield surface) images it displaced by the plate offset 2 t tan(theta') cos(theta)
+    # times the mirror's magnification d1/d2, in the plane of incidence, and the path with two more
+    # internal reflections by twice that; one disk covers the three images.
+    theta = math.radians(d["incidence_windshield_deg"])
+    theta_t = math.asin(math.sin(theta) / 1.52)
+    ghost_shift = 2 * GLASS_MM * math.tan(theta_t) * math.cos(theta) * LED_TO_MIRROR / d["d2"]
+    across = np.cross(x_axis, r2)
+    sb.add("pupil_image", disk(pupil_image_r + ghost_shift + 0.2, 64), {"type": "aperture"},
+           frame_matrix(d["led"] + ghost_shift * across - 0.01 * r2, x_axis, -r2))
     # LED dies facing the scatterer, aimed at it.
     for k, dx in enumerate((-LED_PITCH, 0.0, LED_PITCH)):
         lv, lf, _ = rectangle(0.2, 0.2)

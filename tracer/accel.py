@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from .vec import dot, max3
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
@@ -89,8 +90,8 @@ class Accelerator:
         ng = self._n[gface]
         t = res["tfar"].astype(np.float64)
         # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
-        denom = np.einsum("ij,ij->i", dirs, ng)
-        num = np.einsum("ij,ij->i", self._v0[gface] - origins, ng)
+        denom = dot(dirs, ng)
+        num = dot(self._v0[gface] - origins, ng)
         ok = hit & (np.abs(denom) > 1e-9)
         t = np.where(ok, num / np.where(ok, denom, 1.0), t)
         t = np.where(hit, t, np.inf)
@@ -102,6 +103,6 @@ class Accelerator:
         """Origins for rays leaving surface ``points`` along ``dirs``: offset along the geometric
         normal to the side the ray goes, by a distance that scales with the coordinates' magnitude
         (float32 Embree resolves about 6e-8 of it)."""
-        scale = OFFSET_SCALE * (1.0 + np.abs(points - self.center).max(axis=1))
-        side = np.where(np.einsum("ij,ij->i", dirs, normals) >= 0, 1.0, -1.0)
+        scale = OFFSET_SCALE * (1.0 + max3(np.abs(points - self.center)))
+        side = np.where(dot(dirs, normals) >= 0, 1.0, -1.0)
         return points + (side * scale)[:, None] * normals

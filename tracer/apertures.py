@@ -12,6 +12,7 @@ import numpy as np
 
 from .accel import Accelerator
 from .sampling import disk_aperture_pdf, sample_disk_aperture, sample_triangles, triangle_areas
+from .vec import norm
 
 
 class DiskTarget:
@@ -43,7 +44,7 @@ class MeshTarget:
     def sample(self, origins: np.ndarray, u: np.ndarray):
         points, _, _ = sample_triangles(self.triangles, u)
         v = points - origins
-        dist = np.linalg.norm(v, axis=1)
+        dist = norm(v)
         d = v / np.maximum(dist, 1e-300)[:, None]
         cos = np.abs(d @ self.normal)
         ok = (cos > 1e-9) & (dist > 0)

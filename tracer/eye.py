@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
+from .vec import normalize
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -127,7 +128,7 @@ class ThinLensEye:
         else:
             q = np.stack([sx * s / f - lens_xy[:, 0], sy * s / f - lens_xy[:, 1], np.full_like(sx, s)], axis=1)
             d_local = q
-        d_local /= np.linalg.norm(d_local, axis=1, keepdims=True)
+        d_local = normalize(d_local)
         origins = self.position + lens_xy[:, :1] * self.right + lens_xy[:, 1:2] * self.up
         return origins, self.to_world(d_local), d_local[:, 2] ** 4 / (f * f)
 

@@ -140,6 +140,14 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
     return out
 
 
+def adaptation_luminance(y: np.ndarray) -> float:
+    """The luminance (cd/m^2) the eye adapts to: the log-average (Ward 1994) over the pixels that
+    receive light. Pixels that receive none (no environment, nothing in view) are left out: an eye
+    looking at a HUD in the dark adapts to what it sees, not to an infinitely dark void."""
+    lit = y > 1e-9 * max(float(y.max()), 1e-300)
+    return log_average_luminance(y[lit]) if lit.any() else log_average_luminance(y)
+
+
 def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
                  budget: Budget, analysis: dict | None) -> dict:
     y = image @ Y_WEIGHTS
@@ -189,7 +197,7 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
         raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
     y = image @ Y_WEIGHTS
-    preview, info = tonemap_ward(image)
+    preview, info = tonemap_ward(image, adaptation_luminance(y))
     analysis = brightness_theorem(integrator, y, var_y) if analyse and integrator.accel is not None else None
     report = build_report(scene, result, image, var_y, info, budget, analysis)
     out = Path(out_dir)

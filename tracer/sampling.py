@@ -14,6 +14,7 @@ Conventions
 from __future__ import annotations
 
 import numpy as np
+from .vec import dot, norm
 
 #: |cos| between a sampled direction and an aperture's normal below which the direction is
 #: treated as grazing the aperture plane: its solid-angle density would be unbounded, so both
@@ -208,7 +209,7 @@ def frame_from_normal(
     1-8 (2017), http://jcgt.org/published/0006/01/01/.
     """
     n = np.asarray(n, dtype=np.float64)
-    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    n = n / norm(n)[..., None]
     x, y, z = n[..., 0], n[..., 1], n[..., 2]
     sign = np.copysign(1.0, z)
     a = -1.0 / (sign + z)
@@ -219,9 +220,9 @@ def frame_from_normal(
         return t, b, n
 
     hint = np.broadcast_to(np.asarray(tangent_hint, dtype=np.float64), n.shape)
-    t_hint = hint - np.sum(hint * n, axis=-1, keepdims=True) * n
-    length = np.linalg.norm(t_hint, axis=-1, keepdims=True)
-    usable = length > 1e-6 * np.linalg.norm(hint, axis=-1, keepdims=True)
+    t_hint = hint - dot(hint, n)[..., None] * n
+    length = norm(t_hint)[..., None]
+    usable = length > 1e-6 * norm(hint)[..., None]
     t_hint = np.divide(t_hint, length, out=np.zeros_like(t_hint), where=usable)
     t = np.where(usable, t_hint, t)
     b = np.where(usable, np.cross(n, t), b)
@@ -263,7 +264,7 @@ def to_local(v_world: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -
         The vectors in the local frame.
     """
     v = np.asarray(v_world, dtype=np.float64)
-    return np.stack([np.sum(v * e, axis=-1) for e in (t, b, n)], axis=-1)
+    return np.stack([dot(v, e) for e in (t, b, n)], axis=-1)
 
 
 def gaussian_lobe(
@@ -387,7 +388,7 @@ def sample_disk_aperture(
     t, b, nn = (e[0] for e in frame_from_normal(np.asarray(normal, dtype=np.float64)[None, :]))
     xy = radius * uniform_disk_concentric(u)
     v = np.asarray(center, dtype=np.float64) + xy[:, 0:1] * t + xy[:, 1:2] * b - origins
-    dist = np.linalg.norm(v, axis=-1)
+    dist = norm(v)
     d = np.divide(v, dist[:, None], out=np.zeros_like(v), where=dist[:, None] > 0.0)
     cos = np.abs(d @ nn)
     ok = cos > GRAZING_COS

@@ -22,6 +22,7 @@ import numpy as np
 from ..sampling import uniform_disk_concentric
 from ..units import Y_WEIGHTS
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
+from ..vec import max3
 
 
 
@@ -122,9 +123,9 @@ class BackwardTracer(Integrator):
                     continue
                 d_out, factor, alive = surf.scatter(it, rng, radiance=True)
                 t_new = thr[sel] * factor
-                alive &= t_new.max(axis=1) > 0
+                alive &= max3(t_new) > 0
                 if depth >= ROULETTE_DEPTH:
-                    q = np.clip(t_new.max(axis=1) / ROULETTE_WEIGHT, 0.0, 1.0)
+                    q = np.clip(max3(t_new) / ROULETTE_WEIGHT, 0.0, 1.0)
                     survive = rng.random(len(sel)) < q
                     alive &= survive
                     t_new = t_new / np.where(alive, q, 1.0)[:, None]
@@ -139,7 +140,7 @@ class BackwardTracer(Integrator):
             origins, dirs = np.concatenate(next_o), np.concatenate(next_d)
             thr, idx = np.concatenate(next_t), np.concatenate(next_i)
         self.truncated += len(idx)
-        contributing = np.nonzero(radiance.max(axis=1) > 0)[0]
+        contributing = np.nonzero(max3(radiance) > 0)[0]
         film.add(pix[contributing], radiance[contributing])
         film.samples += self.spp
         return n, int(found.sum())

@@ -22,6 +22,7 @@ from ..eye import ThinLensEye
 from ..optics.surfaces import Interaction, Surface, make_surface
 from ..scene import Scene
 from ..units import Y_WEIGHTS
+from ..vec import dot, norm
 
 #: Rays per batch (structure of arrays, one Embree call per bounce).
 DEFAULT_BATCH = 1 << 17
@@ -179,8 +180,8 @@ class Integrator:
         if obj.normals is not None:
             nv = obj.normals
             ns = w0[:, None] * nv[face[:, 0]] + u[:, None] * nv[face[:, 1]] + v[:, None] * nv[face[:, 2]]
-            ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
-            ns = np.where((np.einsum("ij,ij->i", ns, ng) < 0)[:, None], -ns, ns)
+            ns /= np.maximum(norm(ns), 1e-300)[:, None]
+            ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
         uv = None
         if obj.uv is not None:
             t = obj.uv

@@ -23,6 +23,7 @@ from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
+from ..vec import dot, max3
 
 
 
@@ -82,7 +83,7 @@ class ForwardTracer(Integrator):
             d, p = self._directions(rng, surf, points[sel], nrm)
             dirs[sel], pdf_dir[sel] = d, p
             normal[sel] = nrm
-        cos = np.einsum("ij,ij->i", dirs, normal)
+        cos = dot(dirs, normal)
         alive = (cos > 0) & (pdf_dir > 0)
         flux = np.where(alive[:, None], radiance * (cos / np.where(alive, pdf_pos * pdf_dir, 1.0))[:, None], 0.0)
         origins = self.accel.spawn(points, normal, dirs) if self.accel else points
@@ -96,9 +97,9 @@ class ForwardTracer(Integrator):
         d = to_world(cosine_hemisphere(rng.random((m, 2))), t, b, nn)
         aim = surf.obj.material.aim
         if aim is None or aim.share == 0:
-            return d, np.maximum(np.einsum("ij,ij->i", d, normal), 0.0) / np.pi
+            return d, np.maximum(dot(d, normal), 0.0) / np.pi
         d, _, p_t = self._directed_split(aim, points, d, rng)
-        p_cos = np.maximum(np.einsum("ij,ij->i", d, normal), 0.0) / np.pi
+        p_cos = np.maximum(dot(d, normal), 0.0) / np.pi
         return d, aim.share * p_t + (1 - aim.share) * p_cos
 
     def _directed_split(self, aim, origins: np.ndarray, d_own: np.ndarray, rng):
@@ -128,7 +129,7 @@ class ForwardTracer(Integrator):
         fcos = surf.eval_fcos(it, d)
         ok = np.where(aimed, p_t > 0, alive) & (mix > 0)
         weight = np.where(ok[:, None], fcos / np.where(ok, mix, 1.0)[:, None], 0.0)
-        return d, weight, ok & (weight.max(axis=1) > 0)
+        return d, weight, ok & (max3(weight) > 0)
 
     def run_batch(self, rng, film):
         n = self.batch_size
@@ -139,7 +140,7 @@ class ForwardTracer(Integrator):
         origins, dirs, flux, alive = self.emit(rng, n)
         keep = np.nonzero(alive)[0]
         origins, dirs, flux = origins[keep], dirs[keep], flux[keep]
-        flux0 = flux.max(axis=1)
+        flux0 = max3(flux)
         found = 0
         for depth in range(self.max_depth):
             if len(flux) == 0:
@@ -166,9 +167,9 @@ class ForwardTracer(Integrator):
                 else:
                     d_out, factor, ok = surf.scatter(it, rng, radiance=False)
                 f_new = flux[sel] * factor
-                ok &= f_new.max(axis=1) > 0
+                ok &= max3(f_new) > 0
                 if depth >= ROULETTE_DEPTH:
-                    q = np.clip(f_new.max(axis=1) / flux0[sel] / ROULETTE_WEIGHT, 0.0, 1.0)
+                    q = np.clip(max3(f_new) / flux0[sel] / ROULETTE_WEIGHT, 0.0, 1.0)
                     ok &= rng.random(len(sel)) < q
                     f_new = f_new / np.where(ok, q, 1.0)[:, None]
                 k = np.nonzero(ok)[0]

@@ -8,11 +8,7 @@ r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), r_p = (n2 cos_i - n1 cos_t)
 from __future__ import annotations
 
 import numpy as np
-
-
-def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise dot product of (n, 3) arrays."""
-    return np.einsum("ij,ij->i", a, b)
+from ..vec import dot, normalize
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -48,4 +44,4 @@ def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray | float, cos_i: np.nda
     incident side (d . n = -cos_i); eta = n_t / n_i."""
     eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
     t = d / eta[:, None] + (cos_i / eta - cos_t)[:, None] * n
-    return t / np.linalg.norm(t, axis=1, keepdims=True)
+    return normalize(t)

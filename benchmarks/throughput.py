@@ -1,0 +1,64 @@
+"""Rays per second of the tracer end to end against the raw embreex intersection rate, measured in
+the same run on the same geometry (the hud-direct preset unless another scene is named).
+
+    .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S]
+
+Raw rate: one Embree call on 2^20 rays with random origins in the scene's bounding box and random
+directions, repeated, counting rays / second (the ceiling for one core). End to end: the forward
+and the backward method for S seconds each (everything: sampling, shading, film).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from presets import PRESETS  # noqa: E402
+from tracer.accel import Accelerator  # noqa: E402
+from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
+from tracer.scene import load_scene  # noqa: E402
+
+
+def raw_embree_rate(scene, n: int = 1 << 20, repeats: int = 5) -> float:
+    objs = scene.traced_objects
+    accel = Accelerator([(o.vertices, o.faces) for o in objs])
+    allv = np.concatenate([o.vertices for o in objs])
+    lo, hi = allv.min(axis=0), allv.max(axis=0)
+    rng = make_rng(0)
+    o = lo + (hi - lo) * rng.random((n, 3))
+    d = uniform_sphere(rng.random((n, 2)))
+    o32, d32 = o.astype(np.float32) - accel.center.astype(np.float32), d.astype(np.float32)
+    best = 0.0
+    for _ in range(repeats):
+        t = time.perf_counter()
+        accel._scene.run(o32, d32, output=True)
+        best = max(best, n / (time.perf_counter() - t))
+    return best
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scene", nargs="?", default="hud-direct")
+    ap.add_argument("--seconds", type=float, default=20.0)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
+        scene = load_scene(folder)
+        raw = raw_embree_rate(scene)
+        print(f"raw embreex intersection rate: {raw:,.0f} rays/s (one call on 2^20 random rays, best of 5)")
+        for method in ("forward", "backward"):
+            res = INTEGRATORS[method](scene, 1).render(Budget(seconds=args.seconds))
+            print(f"{method:8s} end to end: {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
+                  f"{res.seconds:.1f} s) = {res.rays_per_second / raw:.2f} of raw; efficiency {res.efficiency:.3g}")
+
+
+if __name__ == "__main__":
+    main()
