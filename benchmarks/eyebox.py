@@ -4,8 +4,9 @@
 
 For eye positions on a grid in the eye's right/up plane, the deterministic brightness-theorem
 analysis (tracer.analysis, chief rays through every specular branch) gives the luminance of the
-display, with every LCD cell made clear, at the centre and near the four corners of the field. The
-eyebox is where all five stay at or above 50 % of their value at the design eye position.
+display, with every LCD cell made clear, at five points of its virtual image (the centre and near
+the four corners, fixed in space). The eyebox is where all five stay at or above 50 % of their
+value at the design eye position.
 """
 
 from __future__ import annotations
@@ -27,25 +28,27 @@ from tracer.units import Y_WEIGHTS  # noqa: E402
 
 
 def field_luminance(scene, offset_right: float, offset_up: float, field_deg) -> np.ndarray:
-    """Predicted luminance (cd/m^2) at the centre and at the corners (80 % of the half-field) of
-    the field, clear LCD."""
+    """Predicted luminance (cd/m^2), clear LCD, of five points of the virtual image (its centre and
+    points at 80 % of the half-field toward its corners, fixed in space at the accommodation
+    distance) seen from the eye moved by the given offsets (mm)."""
     eye = scene.eye
     right = np.cross(eye.gaze, eye.up)
     right /= np.linalg.norm(right)
     up = np.cross(right, eye.gaze)
+    tx, ty = (0.8 * np.tan(np.radians(f) / 2) for f in field_deg)
+    corners = [(0, 0), (-tx, ty), (tx, ty), (-tx, -ty), (tx, -ty)]
     base = eye.position.copy()
+    dist = eye.accommodation_distance_mm
+    points = np.array([base + dist * (eye.gaze + a * right + b * up) for a, b in corners])
     eye.position = base + offset_right * right + offset_up * up
-    eye.resolution = (3, 3)
-    eye.fov_deg = (1.2 * field_deg[0], 1.2 * field_deg[1])  # corners at 80 % of the half-field
     try:
-        integ = INTEGRATORS["backward"](scene, 0)
-        res = specular_paths(integ, stride=1)
+        res = specular_paths(INTEGRATORS["backward"](scene, 0), directions=points - eye.position)
     finally:
         eye.position = base
-    total = np.zeros(9)
+    total = np.zeros(len(points))
     for p in res["paths"]:
         np.add.at(total, p["pixel"], p["luminance"] @ Y_WEIGHTS)
-    return total[[4, 0, 2, 6, 8]]
+    return total
 
 
 def main():

@@ -1,6 +1,6 @@
 """hud-direct: the paper's HUD without a diffuse screen (sec. 3, Fig. 5; sec. 4.2).
 
-Light path: three LEDs (0.2 x 0.2 mm dies, paper sec. 3) -> a narrow-angle raster scatterer
+Light path: ten LEDs (0.2 x 0.2 mm dies, paper sec. 3) -> a narrow-angle raster scatterer
 (Gaussian lobe, sec. 4.2) -> an LCD slide (clear symbols on a 300:1 black, sec. 3) in an absorbing
 frame -> a concave mirror -> the inner surface of a 4.76 mm windshield (n = 1.52, both surfaces
 traced) -> the eye. Numbers from ../shared/reference/hud-physics.md: virtual image at 2.5 m, field
@@ -17,8 +17,8 @@ float32 Embree resolves the optics finely):
 - The LCD lies on the line ML at s_o = 1 / (P + 1/(VID - d2)) = 177.6 mm from the mirror, where the
   mirror forms its virtual image at VID = 2500 mm from the eye (magnification 7.9); its size follows
   from the field of view.
-- The scatterer (sigma 3 x 2.5 deg) spreads each LED's light into an eyebox; the two outer LEDs,
-  5 mm to either side, widen it horizontally. The scatterer aims a share of its light "away from"
+- The scatterer (sigma 3.5 x 3 deg) spreads each LED's light into a patch of the eyebox; a 5 x 2 grid
+  of LEDs (pitch 7 x 5 mm, imaged 4.4 times larger) tiles the eyebox with such patches. The scatterer aims a share of its light "away from"
   the image of the eye pupil formed by the mirror (at the LED, radius r_pupil d1/d2): the paper's
   directed split toward the entrance pupil of the optical system (sec. 2).
 """
@@ -49,8 +49,9 @@ RESOLUTION = (420, 156)  # 1 arcmin pixels
 PUPIL_MM = 4.0
 GLASS_MM = 4.76
 LED_LUMINANCE = 1.0e9  # cd/m^2 per die (see README: what the design's etendue demands)
-LED_PITCH = 5.0
-SCATTER_SIGMA_DEG = (3.0, 2.5)
+LED_GRID = (5, 2)  # columns (along x) and rows of LED dies
+LED_PITCH = (7.0, 5.0)  # mm; imaged onto the eye plane magnified d2/d1 = 4.4 times
+SCATTER_SIGMA_DEG = (3.5, 3.0)
 LCD_TRANSMITTANCE = 0.05
 CONTRAST = 300.0
 MIRROR_R = 0.9
@@ -157,14 +158,21 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
     across = np.cross(x_axis, r2)
     sb.add("pupil_image", disk(pupil_image_r + ghost_shift + 0.2, 64), {"type": "aperture"},
            frame_matrix(d["led"] + ghost_shift * across - 0.01 * r2, x_axis, -r2))
-    # LED dies facing the scatterer, aimed at it.
-    for k, dx in enumerate((-LED_PITCH, 0.0, LED_PITCH)):
-        lv, lf, _ = rectangle(0.2, 0.2)
-        sb.add(f"led_{k}", (lv, lf), {"type": "emitter", "luminance": LED_LUMINANCE,
-                                      "aim": {"target": "scatterer", "share": 0.95}},
-               frame_matrix(d["led"] + dx * x_axis, x_axis, -r2))
+    # LED dies facing the scatterer, aimed at it: a grid centred on the design LED position, so that
+    # their images tile the eyebox.
+    across = np.cross(x_axis, r2)
+    k = 0
+    for row in range(LED_GRID[1]):
+        for col in range(LED_GRID[0]):
+            offset = ((col - (LED_GRID[0] - 1) / 2) * LED_PITCH[0] * x_axis
+                      + (row - (LED_GRID[1] - 1) / 2) * LED_PITCH[1] * across)
+            lv, lf, _ = rectangle(0.2, 0.2)
+            sb.add(f"led_{k}", (lv, lf), {"type": "emitter", "luminance": LED_LUMINANCE,
+                                          "aim": {"target": "scatterer", "share": 0.95}},
+                   frame_matrix(d["led"] + offset, x_axis, -r2))
+            k += 1
     # Housing below the LED so that nothing escapes backward into the view.
-    hv, hf, _ = rectangle(40.0, 40.0)
+    hv, hf, _ = rectangle(60.0, 40.0)
     sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(d["led"] + 1.0 * r2, x_axis, -r2))
     eye = d["eye"]
     return sb.write(

@@ -82,21 +82,29 @@ def _scattered_luminance(integrator, surf, it: Interaction, quad) -> np.ndarray:
     return out
 
 
-def specular_paths(integrator, stride: int | None = None, max_depth: int = 12):
-    """Follow chief rays of a pixel grid through all specular branches.
+def specular_paths(integrator, stride: int | None = None, max_depth: int = 12, directions: np.ndarray | None = None):
+    """Follow chief rays of a pixel grid (or along given world ``directions`` (p, 3) from the pupil
+    centre) through all specular branches.
 
-    Returns a dict with ``pixels`` (p,) flat indices analysed, ``stride``, and ``paths``: a list of
-    {"path": str, "pixel" (k,) positions into ``pixels``, "luminance" (k, 3) predicted cd/m^2,
-    "factor" (k,) Y of the product of R and T, "lcd_open" (k,) bool or None}.
+    Returns a dict with ``pixels`` (p,) flat indices analysed (or 0..p-1 for given directions),
+    ``stride``, ``grid`` and ``paths``: a list of {"path": str, "pixel" (k,) positions into
+    ``pixels``, "luminance" (k, 3) predicted cd/m^2, "factor" (k,) Y of the product of R and T,
+    "lcd" (k,) the first LCD's transmittance relative to a clear cell, NaN if none}.
     """
     eye = integrator.eye
     w, h = eye.width, eye.height
-    if stride is None:
-        stride = max(1, math.ceil(math.sqrt(w * h / 40000)))
-    jj, ii = np.meshgrid(np.arange(stride // 2, h, stride), np.arange(stride // 2, w, stride), indexing="ij")
-    pixels = (jj * w + ii).ravel()
-    sx, sy = eye.pixel_centers()
-    origins, dirs, _ = eye.generate_rays(sx[pixels % w], sy[pixels // w], np.zeros((len(pixels), 2)))
+    if directions is not None:
+        stride, jj = 1, np.zeros((1, len(directions)))
+        pixels = np.arange(len(directions))
+        dirs = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+        origins = np.repeat(eye.position[None], len(dirs), axis=0)
+    else:
+        if stride is None:
+            stride = max(1, math.ceil(math.sqrt(w * h / 40000)))
+        jj, ii = np.meshgrid(np.arange(stride // 2, h, stride), np.arange(stride // 2, w, stride), indexing="ij")
+        pixels = (jj * w + ii).ravel()
+        sx, sy = eye.pixel_centers()
+        origins, dirs, _ = eye.generate_rays(sx[pixels % w], sy[pixels // w], np.zeros((len(pixels), 2)))
     quad = _emitter_quadrature(integrator)
     env = integrator.scene.environment
     n = len(pixels)
