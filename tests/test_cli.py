@@ -105,3 +105,20 @@ def test_bad_input_names_file_and_field_and_writes_nothing(tmp_path, case):
     assert "scene.json" in res.stderr and field in res.stderr
     assert "Traceback" not in res.stderr
     assert not out.exists()
+
+
+def test_ctrl_c_writes_a_partial_result(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "tracer.cli", "render", "analytic-mirror", "--method", "forward",
+                             "--seconds", "120", "--out", str(out)], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    time.sleep(6)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["partial"] is True and report["seconds"] < 60 and report["rays"] > 0
+    ch, attrs = read_exr_channels(out / "image.exr")
+    assert attrs["hud:partial"] == 1 and all(np.all(np.isfinite(c)) for c in ch.values())

@@ -181,3 +181,17 @@ def test_eq3_stratification_moves_noise_not_answer(tmp_path):
     for i in range(1, 3):
         assert abs(means[i] - means[0]) < z_bound(2) * math.hypot(sems[i], sems[0])
     assert sems[2] < 0.5 * sems[0]
+
+
+def test_hdri_environment_calibrated_to_a_mean(tmp_path, preset):
+    """A panorama calibrated to a mean luminance renders that luminance where it is uniform."""
+    from tracer.imageio import write_exr
+
+    folder = preset("analytic-furnace")
+    img = np.full((16, 32), 3.0, np.float32)
+    write_exr(folder / "sky.exr", {"R": img, "G": img, "B": img})
+    edit_json(folder, lambda d: d.update(objects=[], environment={
+        "type": "hdri", "file": "sky.exr", "calibration": {"mode": "mean", "value": 250.0}, "rotation_deg": 30}))
+    y, var, _ = render(folder, "backward", 300_000)
+    assert np.all(np.abs(y - 250.0) < z_bound(y.size) * np.sqrt(var) + 1e-6)
+    assert y.mean() == pytest.approx(250.0, rel=1e-3)
