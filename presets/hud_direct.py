@@ -14,11 +14,12 @@ float32 Embree resolves the optics finely):
 - The mirror is a patch of the ellipsoid whose foci are E' and the centre LED L (|LM| = d1 = 250 mm):
   it images the LED stigmatically onto the (mirrored) pupil, so an eye at E sees the whole field lit
   through the LCD (the hint of the issue). Its power is P = 1/d1 + 1/d2 in both meridians.
-- The LCD lies on the line ML at s_o = 1 / (P + 1/(VID - d2)) = 177.6 mm from the mirror, where the
+- The LCD lies on the line ML at s_o = 1 / (P + 1/(VID - d2)) = 177.8 mm from the mirror, where the
   mirror forms its virtual image at VID = 2500 mm from the eye (magnification 7.9); its size follows
   from the field of view.
 - The scatterer (sigma 3.5 x 3 deg) spreads each LED's light into a patch of the eyebox; a 5 x 2 grid
-  of LEDs (pitch 7 x 5 mm, imaged 4.4 times larger) tiles the eyebox with such patches. The scatterer aims a share of its light "away from"
+  of LEDs (pitch 7 x 5 mm, imaged 4.4 times larger) tiles the eyebox with such patches. The scatterer
+  aims a share of its light "away from"
   the image of the eye pupil formed by the mirror (at the LED, radius r_pupil d1/d2): the paper's
   directed split toward the entrance pupil of the optical system (sec. 2).
 """
@@ -116,8 +117,6 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
     x_axis = np.array([1.0, 0.0, 0.0])
     r2 = d["r2"]
     # Windshield: a glass slab whose inner face passes through the windshield point.
-    rake = math.radians(RAKE_DEG)
-    along = np.array([0.0, -math.cos(rake), math.sin(rake)])
     slab_center = d["w_point"] - 0.5 * GLASS_MM * d["n_ws"]
     v, f = box(700.0, 450.0, GLASS_MM)
     sb.add("windshield", (v, f), {"type": "dielectric", "ior": 1.52},

@@ -17,6 +17,7 @@ from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import Y_WEIGHTS  # noqa: E402
 
+
 #: Sidak-corrected two-sided z bound for alpha = 0.01 over m comparisons.
 def z_bound(m: int, alpha: float = 0.01) -> float:
     from statistics import NormalDist

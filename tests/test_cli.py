@@ -5,7 +5,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -47,7 +46,8 @@ def test_render_hud_direct_writes_image_preview_report(tmp_path):
     bt = report["brightness_theorem"]
     # The symbols follow the brightness theorem; the black leak is symbol / 300 (plus ghost spill).
     assert bt["symbol"]["predicted_cd_m2"] > 0
-    assert abs(bt["symbol"]["rendered_cd_m2"] - bt["symbol"]["predicted_cd_m2"]) < 4.5 * bt["symbol"]["standard_error_cd_m2"]
+    sym = bt["symbol"]
+    assert abs(sym["rendered_cd_m2"] - sym["predicted_cd_m2"]) < 4.5 * sym["standard_error_cd_m2"]
     assert "ghost" in bt and bt["ghost"]["ratio_to_symbol"] > 0.3
     assert (out / "preview.png").is_file()
 
@@ -79,13 +79,15 @@ def test_no_light_is_reported_not_silent(tmp_path, preset):
 
 BAD = {
     "malformed_json": (lambda p: (p / "scene.json").write_text("{ not json"), ""),
-    "missing_mesh": (lambda p: edit_json(p, lambda d: d["objects"][0].update(mesh="meshes/nope.obj")), "objects[0].mesh"),
+    "missing_mesh": (lambda p: edit_json(p, lambda d: d["objects"][0].update(mesh="meshes/nope.obj")),
+                     "objects[0].mesh"),
     "missing_texture": (lambda p: edit_json(p, lambda d: d["objects"][2]["material"].update(image="textures/nope.png")),
                         "objects[2].material.image"),
     "negative_luminance": (lambda p: edit_json(p, lambda d: d["objects"][-2]["material"].update(luminance=-5)),
                            "material.luminance"),
     "zero_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=0)), "eye.pupil_diameter_mm"),
-    "negative_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=-4)), "eye.pupil_diameter_mm"),
+    "negative_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=-4)),
+                       "eye.pupil_diameter_mm"),
     "unknown_material": (lambda p: edit_json(p, lambda d: d["objects"][1]["material"].update(type="unobtainium")),
                          "objects[1].material.type"),
     "degenerate_transform": (lambda p: edit_json(p, lambda d: d["objects"][1].update(

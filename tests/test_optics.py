@@ -98,7 +98,8 @@ def test_coating_and_mirror_and_absorber_conserve_energy():
 @pytest.mark.parametrize("mtype,params", [
     ("lambertian", {"reflectance": np.array([0.5, 0.6, 0.7])}),
     ("lambertian_transmitter", {"transmittance": np.array([0.6, 0.6, 0.6]), "reflectance": np.array([0.3, 0.3, 0.3])}),
-    ("diffuser", {"transmittance": np.full(3, 0.9), "sigma": np.sin(np.radians([4.0, 2.0])), "sigma_deg": np.array([4.0, 2.0])}),
+    ("diffuser", {"transmittance": np.full(3, 0.9), "sigma": np.sin(np.radians([4.0, 2.0])),
+                  "sigma_deg": np.array([4.0, 2.0])}),
 ])
 def test_scattering_surfaces_conserve_energy_and_match_their_pdf(mtype, params):
     """Hemispherical albedo by sampling (weights) equals the integral of eval_fcos over the sphere

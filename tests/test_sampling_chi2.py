@@ -14,8 +14,8 @@ import math
 
 import numpy as np
 import pytest
-
 from chi2 import ChiSquareTest, gamma_q  # tests/chi2.py; pytest puts tests/ on sys.path
+
 from tracer import sampling as smp
 
 SAMPLES = 1_000_000
@@ -125,7 +125,7 @@ def lobe_test(beta0, sigma_sampled, sigma_tested, seed) -> ChiSquareTest:
         d = lift(beta_x, beta_y)
         return lobe_pdf(d, beta0, sigma_tested) / d[:, 2]
 
-    bounds = tuple((c - 5.0 * s, c + 5.0 * s) for c, s in zip(beta0, sigma_tested))
+    bounds = tuple((c - 5.0 * s, c + 5.0 * s) for c, s in zip(beta0, sigma_tested, strict=True))
     return ChiSquareTest(bounds, (64, 64), sample, density, SAMPLES, seed=seed)
 
 
@@ -133,7 +133,7 @@ def gauss_legendre_2d(f, bounds, panels, order=8) -> float:
     """Integral of f(x, y) (vectorised) over a rectangle by composite Gauss-Legendre."""
     nodes, weights = np.polynomial.legendre.leggauss(order)
     axes = []
-    for (lo, hi), k in zip(bounds, panels):
+    for (lo, hi), k in zip(bounds, panels, strict=True):
         h = (hi - lo) / k
         x = lo + h * (np.arange(k)[:, None] + 0.5 * (nodes + 1.0))
         axes.append((x.ravel(), np.tile(0.5 * h * weights, k)))
@@ -404,7 +404,7 @@ def test_gaussian_lobe_pdf_integrates_to_valid_fraction():
         d = lift(beta_x, beta_y)
         return lobe_pdf(d, NARROW_BETA0, NARROW_SIGMA) / d[:, 2]
 
-    bounds = tuple((c - 8.0 * s, c + 8.0 * s) for c, s in zip(NARROW_BETA0, NARROW_SIGMA))
+    bounds = tuple((c - 8.0 * s, c + 8.0 * s) for c, s in zip(NARROW_BETA0, NARROW_SIGMA, strict=True))
     assert gauss_legendre_2d(narrow, bounds, (16, 16)) == pytest.approx(1.0, abs=1e-10)
 
     # Wide lobe: the hemisphere integral equals P(|beta| < 1), integrated independently over

@@ -11,9 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from .vec import dot, max3
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
+
+from .vec import dot, max3
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6

@@ -45,7 +45,8 @@ def _emitter_quadrature(integrator, level: int = 4):
         t = integrator.objects[slot].triangles
         cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         area = 0.5 * np.linalg.norm(cross, axis=1)
-        p = t[:, None, 0] + b[None, :, :1] * (t[:, None, 1] - t[:, None, 0]) + b[None, :, 1:] * (t[:, None, 2] - t[:, None, 0])
+        e1, e2 = t[:, None, 1] - t[:, None, 0], t[:, None, 2] - t[:, None, 0]
+        p = t[:, None, 0] + b[None, :, :1] * e1 + b[None, :, 1:] * e2
         pts.append(p.reshape(-1, 3))
         nrm.append(np.repeat(cross / (2 * area)[:, None], len(b), axis=0))
         wts.append(np.repeat(area / len(b), len(b)))

@@ -74,10 +74,11 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
     }
     y_img = image_y.reshape(-1)
     v_img = var_y.reshape(-1)
-    for p, y in zip(res["paths"][:8], per_path[:8]):
+    for p, y in zip(res["paths"][:8], per_path[:8], strict=True):
         out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / npts),
-                             "predicted_mean_cd_m2": float(y.mean()), "transfer_factor_mean": float(p["factor"].mean())})
-    lcd_paths = [(p, y) for p, y in zip(res["paths"], per_path) if np.any(np.isfinite(p["lcd"]))]
+                             "predicted_mean_cd_m2": float(y.mean()),
+                             "transfer_factor_mean": float(p["factor"].mean())})
+    lcd_paths = [(p, y) for p, y in zip(res["paths"], per_path, strict=True) if np.any(np.isfinite(p["lcd"]))]
     if not lcd_paths:
         return out
     main, main_y = lcd_paths[0]
@@ -108,7 +109,8 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
             np.add.at(grid, p["pixel"], y)
             contrib[p["path"]] = float(grid[idx].mean())
         entry["predicted_by_path_cd_m2"] = contrib
-        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / entry["predicted_cd_m2"] if entry["predicted_cd_m2"] > 0 else None
+        pred = entry["predicted_cd_m2"]
+        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / pred if pred > 0 else None
         sections[key] = entry
     out.update(sections)
     out["lcd_contrast_ratio"] = cr
@@ -124,8 +126,6 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
         dy, dx = _shift(grid_lcd >= 0.5, g_open)
         eye = integrator.eye
         px_mrad = 1000 * 2 * math.atan(eye.half_x / eye.focal) / eye.width
-        g_idx = np.nonzero(g_lcd >= 0.5)[0]
-        m_idx = np.nonzero(grid_lcd.ravel() >= 0.5)[0]
         g_sel = np.isin(ghost["pixel"], np.nonzero(g_lcd >= 0.5)[0])
         m_sel = np.isin(main["pixel"], np.nonzero(grid_lcd.ravel() >= 0.5)[0])
         g_mean = float(ghost_y[g_sel].mean()) if g_sel.any() else 0.0

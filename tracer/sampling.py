@@ -14,6 +14,7 @@ Conventions
 from __future__ import annotations
 
 import numpy as np
+
 from .vec import dot, norm
 
 #: |cos| between a sampled direction and an aperture's normal below which the direction is

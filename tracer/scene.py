@@ -31,9 +31,9 @@ scene.json, version 1::
 
 Material types (``material.type``) and their fields are listed in :data:`MATERIAL_FIELDS`; the
 physics lives in :mod:`tracer.optics`. A scattering material and an emitter may carry
-``"aim": {"target": "eye" | "<object name>", "share": w, "mode": "toward" | "away"}``: the paper's directed split (sec. 2),
-used by the forward method. An object of type ``aperture`` is not traced: it is a virtual surface
-that names where an optical system's pupil is, for aiming and for the backward eq. (3) strata.
+``"aim": {"target": "eye" | "<object name>", "share": w, "mode": "toward" | "away"}``: the paper's
+directed split (sec. 2), used by the forward method. An object of type ``aperture`` is not traced:
+it is a virtual surface that names where an optical system's pupil is, for aiming and for the backward eq. (3) strata.
 
 Every error raises :class:`tracer.errors.SceneError` naming the file and the JSON field.
 """
@@ -281,7 +281,10 @@ def _transform(ck: _Checker, spec, fld: str) -> np.ndarray:
         t = ck.vector(spec.get("translate", [0, 0, 0]), f"{fld}.translate")
         r = ck.vector(spec.get("rotate_deg", [0, 0, 0]), f"{fld}.rotate_deg")
         s_raw = spec.get("scale", [1, 1, 1])
-        s = ck.vector(s_raw, f"{fld}.scale") if isinstance(s_raw, list) else np.full(3, ck.number(s_raw, f"{fld}.scale"))
+        if isinstance(s_raw, list):
+            s = ck.vector(s_raw, f"{fld}.scale")
+        else:
+            s = np.full(3, ck.number(s_raw, f"{fld}.scale"))
         m = np.eye(4)
         m[:3, :3] = _rotation_xyz(r) @ np.diag(s)
         m[:3, 3] = t
@@ -336,7 +339,10 @@ def _material(ck: _Checker, spec, fld: str, root: Path) -> Material:
     elif mtype == "diffuser":
         p["transmittance"] = ck.rgb(spec["transmittance"], f"{fld}.transmittance")
         s = spec["sigma_deg"]
-        sig = ck.vector(s, f"{fld}.sigma_deg", 2) if isinstance(s, list) else np.full(2, ck.number(s, f"{fld}.sigma_deg"))
+        if isinstance(s, list):
+            sig = ck.vector(s, f"{fld}.sigma_deg", 2)
+        else:
+            sig = np.full(2, ck.number(s, f"{fld}.sigma_deg"))
         if np.any(sig <= 0) or np.any(sig > 60):
             ck.fail(f"{fld}.sigma_deg", "lobe widths must lie in (0, 60] degrees")
         p["sigma"] = np.sin(np.radians(sig))  # width in direction-cosine space

@@ -21,9 +21,8 @@ import numpy as np
 
 from ..sampling import uniform_disk_concentric
 from ..units import Y_WEIGHTS
-from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 from ..vec import max3
-
+from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
 def circle_overlap_area(r1: float, r2: float, d: float) -> float:

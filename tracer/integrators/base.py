@@ -11,8 +11,8 @@ checked once per batch.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -87,7 +87,7 @@ class Film:
         y = values @ Y_WEIGHTS
         self.sum_y2 += np.bincount(pixels, weights=y * y, minlength=n)
 
-    def merge(self, other: "Film"):
+    def merge(self, other: Film):
         self.sum_rgb += other.sum_rgb
         self.sum_y2 += other.sum_y2
         self.samples += other.samples
@@ -131,7 +131,7 @@ class RenderResult:
         return self.rays / self.seconds if self.seconds > 0 else 0.0
 
 
-INTEGRATORS: dict[str, type["Integrator"]] = {}
+INTEGRATORS: dict[str, type[Integrator]] = {}
 
 
 def register(cls):

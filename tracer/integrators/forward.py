@@ -22,9 +22,8 @@ import numpy as np
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
-from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 from ..vec import dot, max3
-
+from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
 @register

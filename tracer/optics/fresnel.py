@@ -8,6 +8,7 @@ r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), r_p = (n2 cos_i - n1 cos_t)
 from __future__ import annotations
 
 import numpy as np
+
 from ..vec import dot, normalize
 
 

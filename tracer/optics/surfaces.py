@@ -18,7 +18,6 @@ import numpy as np
 
 from ..sampling import (
     cosine_hemisphere,
-    cosine_hemisphere_pdf,
     frame_from_normal,
     gaussian_lobe,
     gaussian_lobe_pdf,
