@@ -95,7 +95,7 @@ def cmd_render(args) -> int:
     print(f"{args.method}: {report['rays']:,} rays, {report['paths']:,} paths in {report['seconds']:.1f} s "
           f"({report['rays_per_second']:,.0f} rays/s); efficiency {report['efficiency']:.3e}; "
           f"luminance mean {lum['mean']:.4g}, max {lum['max']:.4g} cd/m^2 -> {args.out}", file=sys.stderr)
-    for w in report["warnings"]:
+    for w in report["warnings"]:  # the report's list: the method's own and the noise check
         print(f"warning: {w}", file=sys.stderr)
     if result.partial:
         return EXIT_INTERRUPTED

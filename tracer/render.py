@@ -25,6 +25,9 @@ from .scene import Scene, load_scene
 from .tonemap import log_average_luminance, tonemap_ward
 from .units import Y_WEIGHTS
 
+#: Median relative standard error of the lit pixels above which the report warns of noise.
+NOISY = 0.5
+
 
 def _erode(mask: np.ndarray) -> np.ndarray:
     """Binary erosion with the 3 x 3 cross on a 2D grid (borders count as outside)."""
@@ -153,6 +156,12 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
     y = image @ Y_WEIGHTS
     rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
     lit = y > 1e-6 * max(float(y.max()), 1e-300)
+    median_err = float(np.median(rel_err[lit])) if lit.any() else None
+    warnings = list(result.warnings)
+    if median_err is not None and median_err > NOISY:
+        warnings.append(f"the image is dominated by noise: the median relative standard error of lit pixels is "
+                        f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time, "
+                        "or use a method that suits the scene (forward for small sources behind optics)")
     return {
         "tracer": f"hud-tracer {__version__}",
         "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
@@ -172,13 +181,13 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
                       "log_average": log_average_luminance(y)},
         "adaptation_luminance": preview_info["adaptation_luminance"],
-        "noise": {"median_relative_standard_error_lit_pixels": float(np.median(rel_err[lit])) if lit.any() else None},
+        "noise": {"median_relative_standard_error_lit_pixels": median_err},
         "preview": preview_info,
         "image": {"width": image.shape[1], "height": image.shape[0],
                   "channels": ["R", "G", "B", "Y", "Y_var"],
                   "pixel_mrad": [1000 * 2 * math.atan(math.tan(math.radians(scene.eye.fov_deg[i]) / 2)) /
                                  scene.eye.resolution[i] for i in range(2)]},
-        "warnings": result.warnings,
+        "warnings": warnings,
         "method_details": result.extra,
         "brightness_theorem": analysis,
     }
