@@ -23,7 +23,6 @@ EEVEE. (Mind the sign: ``-atan2(y, x)``, not ``atan2(y, -x)``, which is half a t
 from __future__ import annotations
 
 import math
-import numbers
 from abc import ABC, abstractmethod
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
 from .units import luminance, normalize_color
+from .validate import FieldChecker
 
 #: Calibration modes of :class:`HdriEnvironment`.
 CALIBRATION_MODES = ("scale", "mean", "max")
@@ -343,53 +343,11 @@ class HdriEnvironment(Environment):
 
 # Fields each environment type accepts in scene.json.
 _FIELDS = {
-    "none": {"type"},
-    "uniform": {"type", "luminance", "color"},
-    "hdri": {"type", "file", "calibration", "rotation_deg"},
+    "none": set(),
+    "uniform": {"luminance", "color"},
+    "hdri": {"file", "calibration", "rotation_deg"},
 }
-_CALIBRATION_FIELDS = {"mode", "value"}
-
-
-def _finite_number(value, field: str, file: str, minimum=None, strict=False) -> float:
-    """``value`` as a float if it is a finite real number (not a bool, not a string) that is
-    >= ``minimum`` (> if ``strict``); else a SceneError naming ``field``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise SceneError(file, field, f"must be a finite number, got {value!r}")
-    if minimum is not None and (value <= minimum if strict else value < minimum):
-        relation = ">" if strict else ">="
-        raise SceneError(file, field, f"must be {relation} {minimum:g}, got {value!r}")
-    return float(value)
-
-
-class _SpecReader:
-    """Reads the fields of one JSON object; every error names ``<prefix>.<key>``."""
-
-    def __init__(self, block, prefix: str, file: str, allowed: set):
-        if not isinstance(block, dict):
-            raise SceneError(file, prefix, f"must be an object, got {block!r}")
-        self.block, self.prefix, self.file = block, prefix, file
-        unknown = sorted(set(block) - allowed)
-        if unknown:
-            raise self.error(unknown[0], f"unknown field; expected one of {sorted(allowed)}")
-
-    def error(self, key: str, message: str) -> SceneError:
-        return SceneError(self.file, f"{self.prefix}.{key}", message)
-
-    def required(self, key: str):
-        if key not in self.block:
-            raise self.error(key, "is missing")
-        return self.block[key]
-
-    def choice(self, key: str, choices) -> str:
-        value = self.required(key)
-        if not isinstance(value, str) or value not in choices:
-            raise self.error(key, f"unknown value {value!r}; expected one of {list(choices)}")
-        return value
-
-    def number(self, key: str, default=None, minimum=None, strict=False) -> float:
-        """Field ``key`` (required unless a ``default`` is given) as in :func:`_finite_number`."""
-        value = self.required(key) if default is None else self.block.get(key, default)
-        return _finite_number(value, f"{self.prefix}.{key}", self.file, minimum, strict)
+_REQUIRED = {"none": set(), "uniform": {"luminance"}, "hdri": {"file", "calibration"}}
 
 
 def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json") -> Environment:
@@ -430,52 +388,43 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json")
         an image that is missing, unreadable, with more than 4 channels, with negative or
         non-finite pixels, or black with calibration "mean" or "max".
     """
-    if not isinstance(spec, dict):
-        raise SceneError(file, "environment", f"must be an object, got {spec!r}")
+    ck = FieldChecker(file)
+    ck.obj(spec, "environment")
     if "type" not in spec:
-        raise SceneError(file, "environment.type", "is missing")
+        ck.fail("environment.type", "missing required field")
     kind = spec["type"]
     if not isinstance(kind, str) or kind not in _FIELDS:
-        raise SceneError(
-            file, "environment.type", f"unknown type {kind!r}; expected one of {list(_FIELDS)}"
-        )
-    reader = _SpecReader(spec, "environment", file, _FIELDS[kind])
+        ck.fail("environment.type", f"unknown type {kind!r}; expected one of {list(_FIELDS)}")
+    ck.keys(spec, "environment", _REQUIRED[kind] | {"type"}, _FIELDS[kind] - _REQUIRED[kind])
 
     if kind == "none":
         return NoEnvironment()
 
     if kind == "uniform":
-        L = reader.number("luminance", minimum=0.0)
-        color = spec.get("color", [1.0, 1.0, 1.0])
-        if not isinstance(color, list | tuple) or len(color) != 3:
-            raise reader.error("color", f"must be a list of 3 numbers, got {color!r}")
-        rgb = [
-            _finite_number(c, f"environment.color[{i}]", file, minimum=0.0)
-            for i, c in enumerate(color)
-        ]
-        if max(rgb) == 0.0:
-            raise reader.error("color", "must not be black")
+        L = ck.number(spec["luminance"], "environment.luminance", min_value=0.0)
+        rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.color", max_value=None)
+        if rgb.max() == 0.0:
+            ck.fail("environment.color", "must not be black")
         return UniformEnvironment(L, rgb)
 
-    image_file = reader.required("file")
-    if not isinstance(image_file, str) or not image_file:
-        raise reader.error("file", f"must be a non-empty path, got {image_file!r}")
-    calibration = _SpecReader(
-        reader.required("calibration"), "environment.calibration", file, _CALIBRATION_FIELDS
-    )
-    mode = calibration.choice("mode", CALIBRATION_MODES)
-    value = calibration.number("value", minimum=0.0, strict=True)
-    rotation = reader.number("rotation_deg", default=0.0)
+    image_file = ck.string(spec["file"], "environment.file")
+    cal = ck.obj(spec["calibration"], "environment.calibration")
+    ck.keys(cal, "environment.calibration", {"mode", "value"}, set())
+    mode = cal["mode"]
+    if not isinstance(mode, str) or mode not in CALIBRATION_MODES:
+        ck.fail("environment.calibration.mode", f"unknown value {mode!r}; expected one of {list(CALIBRATION_MODES)}")
+    value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True)
+    rotation = ck.number(spec.get("rotation_deg", 0.0), "environment.rotation_deg")
 
     try:
         pixels = read_image(Path(scene_dir) / image_file)
     except ImageReadError as exc:
-        raise reader.error("file", f"cannot read {image_file!r}: {exc.reason}") from exc
+        raise SceneError(file, "environment.file", f"cannot read {image_file!r}: {exc.reason}") from exc
     channels = pixels.shape[2]
     if channels > 4:
-        raise reader.error("file", f"{image_file!r} has {channels} channels; expected 1 to 4")
+        ck.fail("environment.file", f"{image_file!r} has {channels} channels; expected 1 to 4")
     rgb = np.repeat(pixels[..., :1], 3, axis=2) if channels <= 2 else pixels[..., :3]
     try:
         return HdriEnvironment(rgb, mode, value, rotation, source=image_file)
     except ValueError as exc:
-        raise reader.error("file", f"{image_file!r}: {exc}") from exc
+        raise SceneError(file, "environment.file", f"{image_file!r}: {exc}") from exc

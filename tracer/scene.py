@@ -52,6 +52,7 @@ from .environment import Environment, environment_from_spec
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
 from .units import normalize_color
+from .validate import FieldChecker
 
 FORMAT = "hud-scene"
 VERSION = 1
@@ -185,74 +186,6 @@ class Scene:
         return [o for o in self.objects if o.material.type == "emitter"]
 
 
-class _Checker:
-    """Field validation that names the file and the JSON path of every error."""
-
-    def __init__(self, file: str):
-        self.file = file
-
-    def fail(self, fld: str, msg: str):
-        raise SceneError(self.file, fld, msg)
-
-    def obj(self, value, fld: str) -> dict:
-        if not isinstance(value, dict):
-            self.fail(fld, f"expected an object, got {type(value).__name__}")
-        return value
-
-    def keys(self, d: dict, fld: str, required: set[str], optional: set[str]):
-        for k in sorted(required - d.keys()):
-            self.fail(f"{fld}.{k}" if fld else k, "missing required field")
-        for k in sorted(d.keys() - required - optional):
-            allowed = ", ".join(sorted(required | optional)) or "none"
-            self.fail(f"{fld}.{k}" if fld else k, f"unknown field (allowed: {allowed})")
-
-    def number(self, value, fld: str, *, min_value=None, min_exclusive=False, max_value=None) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(fld, f"expected a number, got {json.dumps(value)}")
-        v = float(value)
-        if not math.isfinite(v):
-            self.fail(fld, "must be finite")
-        if min_value is not None and (v < min_value or (min_exclusive and v == min_value)):
-            self.fail(fld, f"must be {'>' if min_exclusive else '>='} {min_value}, got {v:g}")
-        if max_value is not None and v > max_value:
-            self.fail(fld, f"must be <= {max_value}, got {v:g}")
-        return v
-
-    def vector(self, value, fld: str, n: int = 3) -> np.ndarray:
-        if not isinstance(value, list) or len(value) != n:
-            self.fail(fld, f"expected a list of {n} numbers, got {json.dumps(value)}")
-        return np.array([self.number(v, f"{fld}[{i}]") for i, v in enumerate(value)])
-
-    def unit_vector(self, value, fld: str) -> np.ndarray:
-        v = self.vector(value, fld)
-        norm = np.linalg.norm(v)
-        if norm < 1e-12:
-            self.fail(fld, "must not be the zero vector")
-        return v / norm
-
-    def rgb(self, value, fld: str, *, max_value: float | None = 1.0) -> np.ndarray:
-        """A scalar or [r, g, b] in [0, max_value]."""
-        if isinstance(value, list):
-            c = self.vector(value, fld)
-        else:
-            c = np.full(3, self.number(value, fld))
-        for i in range(3):
-            if c[i] < 0 or (max_value is not None and c[i] > max_value):
-                where = fld if not isinstance(value, list) else f"{fld}[{i}]"
-                self.fail(where, f"must lie in [0, {max_value}], got {c[i]:g}")
-        return c
-
-    def string(self, value, fld: str) -> str:
-        if not isinstance(value, str) or not value:
-            self.fail(fld, f"expected a non-empty string, got {json.dumps(value)}")
-        return value
-
-    def boolean(self, value, fld: str) -> bool:
-        if not isinstance(value, bool):
-            self.fail(fld, f"expected true or false, got {json.dumps(value)}")
-        return value
-
-
 def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
     """Rotation matrix for Euler angles (degrees) applied about x, then y, then z (Blender's XYZ)."""
     ax, ay, az = np.radians(deg)
@@ -263,7 +196,7 @@ def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def _transform(ck: _Checker, spec, fld: str) -> np.ndarray:
+def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
     """A 4 x 4 world matrix (mm) from ``matrix`` or translate/rotate_deg/scale; rejects degenerate ones."""
     if spec is None:
         return np.eye(4)
@@ -296,7 +229,7 @@ def _transform(ck: _Checker, spec, fld: str) -> np.ndarray:
     return m
 
 
-def _aim(ck: _Checker, spec, fld: str) -> Aim:
+def _aim(ck: FieldChecker, spec, fld: str) -> Aim:
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"target"}, {"share", "mode"})
     target = ck.string(spec["target"], f"{fld}.target")
@@ -309,7 +242,7 @@ def _aim(ck: _Checker, spec, fld: str) -> Aim:
     return Aim(target, share, mode)
 
 
-def _material(ck: _Checker, spec, fld: str, root: Path) -> Material:
+def _material(ck: FieldChecker, spec, fld: str, root: Path) -> Material:
     ck.obj(spec, fld)
     if "type" not in spec:
         ck.fail(f"{fld}.type", "missing required field")
@@ -380,7 +313,7 @@ def _material(ck: _Checker, spec, fld: str, root: Path) -> Material:
     return Material(mtype, p, aim)
 
 
-def _load_mesh(ck: _Checker, root: Path, rel: str, fld: str):
+def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     """(vertices (v,3), faces (f,3), uv (v,2) or None) from PLY/OBJ/GLB through trimesh."""
     import trimesh
 
@@ -427,7 +360,7 @@ def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
     return h.hexdigest()[:16]
 
 
-def _eye(ck: _Checker, spec) -> EyeSpec:
+def _eye(ck: FieldChecker, spec) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
@@ -454,14 +387,14 @@ def _eye(ck: _Checker, spec) -> EyeSpec:
     return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])))
 
 
-def _method_block(ck: _Checker, spec, fld: str, optional: set[str]) -> dict:
+def _method_block(ck: FieldChecker, spec, fld: str, optional: set[str]) -> dict:
     spec = {} if spec is None else ck.obj(spec, fld)
     ck.keys(spec, fld, set(), optional)
     out = {"max_depth": int(ck.number(spec.get("max_depth", 32), f"{fld}.max_depth", min_value=1, max_value=1000))}
     return out | {k: v for k, v in spec.items() if k != "max_depth"}
 
 
-def _exit_pupil(ck: _Checker, spec, scene_objects: list[SceneObject], eye: EyeSpec) -> ExitPupil:
+def _exit_pupil(ck: FieldChecker, spec, scene_objects: list[SceneObject], eye: EyeSpec) -> ExitPupil:
     """Eq. (3) strata: a disk given in pupil-plane coordinates or projected from a named object."""
     fld = "backward.exit_pupil"
     ck.obj(spec, fld)
@@ -509,7 +442,7 @@ def load_scene(path: str | Path) -> Scene:
         raw = json.loads(raw_bytes.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise SceneError(fname, "", f"malformed JSON: {e}") from None
-    ck = _Checker(fname)
+    ck = FieldChecker(fname)
     ck.obj(raw, "")
     ck.keys(raw, "", {"format", "version", "eye", "objects"},
             {"name", "description", "environment", "backward", "forward"})
