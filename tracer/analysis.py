@@ -22,6 +22,7 @@ import numpy as np
 
 from .optics.surfaces import Emitter, Interaction
 from .units import Y_WEIGHTS
+from .vec import dot, norm
 
 #: Branches whose factor falls below this (relative to the chief ray) are dropped.
 MIN_FACTOR = 1e-5
@@ -57,29 +58,35 @@ def _emitter_quadrature(integrator, level: int = 4):
     return tuple(np.concatenate(a) for a in (pts, nrm, wts, lum, two))
 
 
-def _scattered_luminance(integrator, surf, it: Interaction, quad) -> np.ndarray:
+def _scattered_luminance(integrator, surf, it: Interaction, quad, chunk: int = 1 << 20) -> np.ndarray:
     """(m, 3) luminance (cd/m^2) leaving scattering points toward the eye (against it.d), from the
-    emitters in direct view: sum over quadrature points of f L_e cos_i cos_e / d^2 dA."""
+    emitters in direct view: the sum over quadrature points of f L_e cos_i cos_e / d^2 dA, with one
+    shadow-ray batch (one Embree call) per chunk of point pairs."""
     m = len(it)
     out = np.zeros((m, 3))
-    if quad is None:
+    if quad is None or m == 0:
         return out
     qp, qn, qw, ql, q2 = quad
     to_eye = -it.d
-    for k in range(len(qp)):
-        v = qp[k] - it.p
-        dist = np.linalg.norm(v, axis=1)
+    cos_o = np.maximum(np.abs(dot(to_eye, it.ng)), 1e-12)
+    step = max(1, chunk // m)
+    for k0 in range(0, len(qp), step):
+        k = np.arange(k0, min(k0 + step, len(qp)))
+        # Pairs (surface point i, quadrature point k), flattened i-major: (m * len(k), 3).
+        v = (qp[k][None, :, :] - it.p[:, None, :]).reshape(-1, 3)
+        dist = norm(v)
         w_in = -v / dist[:, None]  # light travels from the emitter point to the surface
-        cos_e = w_in @ qn[k]
-        visible_side = (cos_e > 0) | q2[k]
-        origin = integrator.accel.spawn(it.p, it.ng, -w_in)
+        kk = np.tile(k, m)
+        ii = np.repeat(np.arange(m), len(k))
+        cos_e = dot(w_in, qn[kk])
+        ng, ns = it.ng[ii], it.ns[ii]
+        origin = integrator.accel.spawn(it.p[ii], ng, -w_in)
         blocked = integrator.accel.intersect(origin, -w_in, tmax=dist * (1 - 1e-5) - 1e-2).hit
-        light = Interaction(w_in, it.p, it.ng, it.ns, it.uv)
-        cos_o = np.abs(np.einsum("ij,ij->i", to_eye, it.ng))
-        f = surf.eval_fcos(light, to_eye) / np.maximum(cos_o, 1e-12)[:, None]
-        cos_i = np.abs(np.einsum("ij,ij->i", w_in, it.ng))
-        g = np.where(visible_side & ~blocked, cos_i * np.abs(cos_e) * qw[k] / dist**2, 0.0)
-        out += f * ql[k] * g[:, None]
+        light = Interaction(w_in, it.p[ii], ng, ns, None if it.uv is None else it.uv[ii])
+        f = surf.eval_fcos(light, to_eye[ii]) / cos_o[ii][:, None]
+        g = np.where(((cos_e > 0) | q2[kk]) & ~blocked, np.abs(dot(w_in, ng)) * np.abs(cos_e) * qw[kk] / dist**2, 0.0)
+        contrib = f * ql[kk] * g[:, None]
+        out += contrib.reshape(m, len(k), 3).sum(axis=1)
     return out
 
 

@@ -78,7 +78,11 @@ def cmd_render(args) -> int:
     from .integrators import Budget
     from .render import render_folder
 
-    budget = Budget(rays=args.rays, seconds=args.seconds)
+    try:
+        budget = Budget(rays=args.rays, seconds=args.seconds)
+    except ValueError as e:
+        print(f"error: --rays/--seconds: {e}", file=sys.stderr)
+        return EXIT_INPUT
     flag = StopFlag()
     previous = signal.signal(signal.SIGINT, flag.handler)
     bar = None if args.quiet else ProgressBar()
@@ -170,9 +174,6 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except SceneError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_INPUT
-    except ValueError as e:  # a budget or option out of range
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
 

@@ -51,7 +51,7 @@ import numpy as np
 from .environment import Environment, environment_from_spec
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
-from .units import normalize_color
+from .units import lambertian_luminance_cd_m2, normalize_color
 from .validate import FieldChecker
 
 FORMAT = "hud-scene"
@@ -535,8 +535,6 @@ def load_scene(path: str | Path) -> Scene:
 
 def emitter_luminance(obj: SceneObject) -> float:
     """Luminance (cd/m^2) of an emitter object, from its luminance or its flux (lm) and area."""
-    from .units import lambertian_luminance_cd_m2
-
     p = obj.material.params
     if "luminance" in p:
         return p["luminance"]

@@ -56,7 +56,10 @@ class BackwardTracer(Integrator):
             if inside <= 0:
                 self.warnings.append("backward.exit_pupil lies outside the eye pupil: stratification ignored")
             else:
-                self.strata = (ep.center_mm, ep.radius_mm, ep.share, inside, self.eye.pupil_area - inside)
+                rest = self.eye.pupil_area - inside
+                # A stop that covers the whole pupil leaves no second stratum: all samples go to it.
+                share = ep.share if rest > 1e-12 * self.eye.pupil_area else 1.0
+                self.strata = (ep.center_mm, ep.radius_mm, share, inside, max(rest, 0.0))
         self.truncated = 0
 
     def lens_samples(self, rng: np.random.Generator, n: int):

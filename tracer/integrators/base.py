@@ -20,6 +20,7 @@ from ..accel import Accelerator
 from ..apertures import DiskTarget, MeshTarget
 from ..eye import ThinLensEye
 from ..optics.surfaces import Interaction, Surface, make_surface
+from ..sampling import make_rng
 from ..scene import Scene
 from ..units import Y_WEIGHTS
 from ..vec import dot, norm
@@ -200,8 +201,6 @@ class Integrator:
 
     def render(self, budget: Budget, progress: Progress | None = None,
                should_stop: ShouldStop | None = None) -> RenderResult:
-        from ..sampling import make_rng
-
         film = Film(self.eye.width, self.eye.height)
         paths = found = batches = 0
         partial = False
