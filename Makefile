@@ -25,3 +25,13 @@ test: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out
+
+# The Blender extension: dist/hud_tracer-<version>.zip, built and validated with Blender's own tool.
+BLENDER_EXT = $(VENV)/lib/python3.11/site-packages/bpy/4.5/scripts/addons_core/bl_pkg/cli/blender_ext.py
+
+.PHONY: extension
+extension: $(STAMP)
+	$(PY) tools/fetch_wheels.py
+	mkdir -p dist
+	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
+	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip

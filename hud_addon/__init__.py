@@ -1,23 +1,23 @@
-"""The Blender add-on (a skeleton in this release; the add-on issue fills it in).
+"""HUD Tracer for Blender: set up a HUD scene, render it with the tracer, get cd/m^2 back.
 
-It will export Blender scenes to the tracer's scene format (tracer/scene.py), the one seam between
-Blender and the tracer, and run the tracer with progress and cancel passed as two callables.
-register() and unregister() are safe to call without bpy-side state.
+Import order, lowest to highest (as in BlendLuxCore): properties < export < engine < operators < ui.
+Nothing but this file runs at import time, so that the package can be imported without bpy; the
+modules load on register(). The add-on runs as a subpackage of the extension package
+(bl_ext.<repo>.hud_tracer), beside the tracer and the presets, which it imports relatively.
 """
 
-_CLASSES: tuple = ()
+_MODULES: list = []
 
 
 def register():
-    """Register the add-on's classes (none yet)."""
-    import bpy
+    from . import engine, operators, properties, ui
 
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
+    _MODULES[:] = [properties, engine, operators, ui]
+    for module in _MODULES:
+        module.register()
 
 
 def unregister():
-    import bpy
-
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+    for module in reversed(_MODULES):
+        module.unregister()
+    _MODULES.clear()

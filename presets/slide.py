@@ -7,6 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+try:  # inside the Blender extension, presets and tracer are subpackages of the extension package
+    from ..tracer.imageio import write_png
+except ImportError:  # presets and tracer as top-level packages (command line, tests)
+    from tracer.imageio import write_png
+
 FONT = {  # 5 x 7 glyphs, one string of five bits per row, top row first
     "0": ["01110", "10001", "10011", "10101", "11001", "10001", "01110"],
     "1": ["00100", "01100", "00100", "00100", "00100", "00100", "01110"],
@@ -51,8 +56,6 @@ def slide_array(width: int = 240, height: int = 80) -> np.ndarray:
 
 def slide_image(path: Path, width: int = 240, height: int = 80) -> Path:
     """Write the slide as an 8-bit PNG (0 or 255: exact in sRGB and linear alike)."""
-    from tracer.imageio import write_png
-
     a = (255 * slide_array(width, height)).astype(np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_png(path, np.repeat(a[:, :, None], 3, axis=2))

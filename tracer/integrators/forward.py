@@ -54,6 +54,9 @@ class ForwardTracer(Integrator):
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
                                  "method (the hybrid method of a later release merges both)")
         self.truncated = 0
+        #: When a list, run_batch appends (particle ids (k,), points (k, 3) mm, reached_eye (k,) bool)
+        #: for every event, so that tools can draw the sampled light paths.
+        self.recorder: list | None = None
 
     # -- emission --------------------------------------------------------------------------------
     def emit(self, rng: np.random.Generator, n: int):
@@ -137,16 +140,20 @@ class ForwardTracer(Integrator):
             return n, 0
         eye = self.eye
         origins, dirs, flux, alive = self.emit(rng, n)
-        keep = np.nonzero(alive)[0]
-        origins, dirs, flux = origins[keep], dirs[keep], flux[keep]
+        pid = np.nonzero(alive)[0]
+        origins, dirs, flux = origins[pid], dirs[pid], flux[pid]
         flux0 = max3(flux)
         found = 0
+        self._record(pid, origins, np.zeros(len(pid), bool))
         for depth in range(self.max_depth):
             if len(flux) == 0:
                 break
             t_eye, lens = eye.pupil_hit(origins, dirs)
             hits = self.accel.intersect(origins, dirs)
             at_eye = t_eye < hits.t
+            if self.recorder is not None:
+                eye_points = origins + np.where(at_eye, t_eye, 0)[:, None] * dirs
+                self._record(pid, np.where(at_eye[:, None], eye_points, hits.points), at_eye)
             if np.any(at_eye):
                 sx, sy = eye.retina_point(lens[at_eye], dirs[at_eye])
                 pix = eye.pixel_of(sx, sy)
@@ -154,7 +161,7 @@ class ForwardTracer(Integrator):
                 found += int(ok.sum())
                 film.add(pix[ok], flux[at_eye][ok] / eye.extent[pix[ok]][:, None])
             hit = hits.hit & ~at_eye
-            next_o, next_d, next_f, next_0 = [], [], [], []
+            next_o, next_d, next_f, next_0, next_id = [], [], [], [], []
             for slot in np.unique(hits.obj[hit]):
                 sel = np.nonzero(hit & (hits.obj == slot))[0]
                 surf = self.surfaces[slot]
@@ -176,14 +183,41 @@ class ForwardTracer(Integrator):
                 next_d.append(d_out[k])
                 next_f.append(f_new[k])
                 next_0.append(flux0[sel[k]])
+                next_id.append(pid[sel[k]])
             if not next_o:
                 flux = np.zeros((0, 3))
                 break
             origins, dirs = np.concatenate(next_o), np.concatenate(next_d)
-            flux, flux0 = np.concatenate(next_f), np.concatenate(next_0)
+            flux, flux0, pid = np.concatenate(next_f), np.concatenate(next_0), np.concatenate(next_id)
         self.truncated += len(flux)
         film.samples += n
         return n, found
+
+    def _record(self, pid: np.ndarray, points: np.ndarray, at_eye: np.ndarray):
+        if self.recorder is not None:
+            self.recorder.append((pid.copy(), points.copy(), at_eye.copy()))
+
+    def light_paths(self, particles: int, only_to_eye: bool = True, seed_batch: int = 0) -> list[np.ndarray]:
+        """Sample ``particles`` light paths and return them as polylines ((k, 3) arrays, mm, from the
+        emitter to the last event), only those that reached the eye pupil by default."""
+        from ..sampling import make_rng
+        from .base import Film
+
+        self.recorder = []
+        saved, self.batch_size = self.batch_size, particles
+        try:
+            self.run_batch(make_rng(self.seed, seed_batch), Film(self.eye.width, self.eye.height))
+        finally:
+            self.batch_size = saved
+            events, self.recorder = self.recorder, None
+        ids = np.concatenate([e[0] for e in events])
+        pts = np.concatenate([e[1] for e in events])
+        eye_hit = np.concatenate([e[2] for e in events])
+        order = np.argsort(ids, kind="stable")  # events of one particle stay in time order
+        ids, pts, eye_hit = ids[order], pts[order], eye_hit[order]
+        starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+        ends = np.r_[starts[1:], len(ids)]
+        return [pts[a:b] for a, b in zip(starts, ends, strict=True) if not only_to_eye or eye_hit[b - 1]]
 
     def finish(self, result):
         super().finish(result)

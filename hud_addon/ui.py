@@ -1,0 +1,118 @@
+"""Panels, shown only when the HUD Tracer engine is active."""
+
+import bpy
+
+ENGINE = "HUD_TRACER"
+
+
+class _HudPanel:
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    COMPAT_ENGINES = {ENGINE}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+class HUD_PT_render(_HudPanel, bpy.types.Panel):
+    bl_label = "HUD Tracer"
+    bl_context = "render"
+
+    def draw(self, context):
+        s = context.scene.hud
+        col = self.layout.column()
+        col.prop(s, "method")
+        col.prop(s, "budget")
+        col.prop(s, "seconds" if s.budget == "SECONDS" else "rays")
+        col.prop(s, "seed")
+        r = context.scene.render
+        col.label(text=f"Retina: {r.resolution_x * r.resolution_percentage // 100} x "
+                       f"{r.resolution_y * r.resolution_percentage // 100} px (Output properties)")
+        row = col.row()
+        row.operator("hud.add_preset")
+        row.operator("hud.export_scene")
+        col.operator("hud.show_light_paths")
+
+
+class HUD_PT_object(_HudPanel, bpy.types.Panel):
+    bl_label = "HUD Optical Role"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.object is not None and context.object.type == "MESH"
+
+    def draw(self, context):
+        h = context.object.hud
+        col = self.layout.column()
+        col.prop(h, "role")
+        role = h.role
+        fields = {"mirror": ["reflectance"], "dielectric": ["ior", "ior_outside"],
+                  "coating": ["reflectance", "transmittance"], "lambertian": ["reflectance"],
+                  "lambertian_transmitter": ["transmittance", "reflectance"],
+                  "diffuser": ["transmittance", "sigma_deg"],
+                  "lcd": ["lcd_image", "lcd_encoding", "transmittance", "contrast_ratio"],
+                  "emitter": ["emission", "luminance" if h.emission == "LUMINANCE" else "flux", "color", "two_sided"]}
+        for name in fields.get(role, []):
+            col.prop(h, name)
+        if role in ("lambertian", "lambertian_transmitter", "diffuser", "emitter"):
+            col.prop(h, "aim")
+            if h.aim != "NONE":
+                if h.aim == "OBJECT":
+                    col.prop(h, "aim_object")
+                col.prop(h, "aim_share")
+                col.prop(h, "aim_mode")
+        if role != "none":
+            col.prop(h, "smooth_normals")
+
+
+class HUD_PT_eye(_HudPanel, bpy.types.Panel):
+    bl_label = "HUD Eye"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.camera is not None
+
+    def draw(self, context):
+        h = context.camera.hud
+        col = self.layout.column()
+        col.prop(h, "pupil_diameter_mm")
+        col.prop(h, "focal_length_mm")
+        col.prop(h, "accommodation_distance_mm")
+
+
+class HUD_PT_world(_HudPanel, bpy.types.Panel):
+    bl_label = "HUD Environment"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None
+
+    def draw(self, context):
+        h = context.world.hud
+        col = self.layout.column()
+        col.prop(h, "kind")
+        if h.kind == "uniform":
+            col.prop(h, "luminance")
+            col.prop(h, "color")
+        elif h.kind == "hdri":
+            col.template_ID(h, "image", open="image.open")
+            col.prop(h, "calibration")
+            col.prop(h, "value")
+            col.prop(h, "rotation_deg")
+
+
+CLASSES = (HUD_PT_render, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,188 @@
+"""Scenarios run inside the bpy 4.5 module, one per process (bpy is imported once per process and
+hangs at exit while a Python render engine is registered, so every scenario disables the add-on
+before it returns). Run by tests/test_blender_addon.py; prints its result as one line "HUD_RESULT <json>"."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="hud-bpy-user-")
+sys.path.insert(0, str(ROOT))
+
+import bpy  # noqa: E402  (the environment above must be set first)
+
+from hud_addon.batch import enable_from_source  # noqa: E402
+
+
+def disable(module: str):
+    import addon_utils  # importable once bpy is
+
+    addon_utils.disable(module)
+
+
+def install_zip(zip_path: str) -> str:
+    repo_dir = Path(tempfile.mkdtemp(prefix="hud-repo-")) / "hud_test"
+    repo_dir.mkdir()
+    bpy.ops.preferences.extension_repo_add(name="hud_test", type="LOCAL", use_custom_directory=True,
+                                           custom_directory=str(repo_dir))
+    repo = next(r.module for r in bpy.context.preferences.extensions.repos if r.custom_directory == str(repo_dir))
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo=repo, enable_on_install=True)
+    return f"bl_ext.{repo}.hud_tracer"
+
+
+def hud_names() -> list[str]:
+    return sorted(n for n in dir(bpy.types) if n.startswith(("HUD_", "HudRender", "HudScene", "HudObject")))
+
+
+def render_preset(module: str, out: Path, preset: str, method: str, rays: int, seed: int) -> dict:
+    bpy.ops.hud.add_preset(preset=preset)
+    scene = bpy.context.scene
+    scene.hud.method, scene.hud.budget, scene.hud.rays, scene.hud.seed = method, "RAYS", rays, seed
+    s = scene.render.image_settings
+    s.file_format, s.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(out / "blender.exr")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    bpy.ops.hud.export_scene(directory=str(out / "scene"))
+    return dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
+
+
+def scenario_install_render(zip_path, out, preset, method, rays, seed):
+    module = install_zip(zip_path)
+    enabled = module in bpy.context.preferences.addons
+    figures = render_preset(module, Path(out), preset, method, int(rays), int(seed))
+    disable(module)
+    return {"module": module, "enabled": enabled, "figures": figures, "left_after_disable": hud_names()}
+
+
+def scenario_roundtrip(out):
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = 1.0
+    bpy.ops.mesh.primitive_plane_add(size=0.2, location=(0.1, 0.2, 0.3), rotation=(0.5, 0.0, 0.25))
+    mirror = bpy.context.object
+    mirror.name = "mirror"
+    mirror.hud.role, mirror.hud.reflectance, mirror.hud.smooth_normals = "mirror", (0.8, 0.7, 0.6), True
+    bpy.ops.mesh.primitive_cube_add(size=0.1, location=(0.0, 0.5, 0.0))
+    glass = bpy.context.object
+    glass.name = "glass"
+    glass.scale = (1.0, 0.05, 1.0)
+    glass.hud.role, glass.hud.ior = "dielectric", 1.6
+    bpy.ops.mesh.primitive_plane_add(size=0.01, location=(0.0, 0.8, 0.0))
+    led = bpy.context.object
+    led.name = "led"
+    led.hud.role, led.hud.emission, led.hud.luminance = "emitter", "LUMINANCE", 1234.0
+    led.hud.aim, led.hud.aim_object, led.hud.aim_share, led.hud.aim_mode = "OBJECT", mirror, 0.7, "toward"
+    cam = scene.camera
+    cam.location = (0.0, -1.0, 0.1)
+    cam.data.hud.pupil_diameter_mm, cam.data.hud.accommodation_distance_mm = 3.5, 2000.0
+    cam.data.hud.focal_length_mm = 17.0
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 160, 50
+    img = bpy.data.images.new("sky", 16, 8, float_buffer=True)
+    img.pixels.foreach_set([0.5] * (16 * 8 * 4))
+    img.filepath_raw = str(Path(out) / "sky.exr")
+    img.file_format = "OPEN_EXR"
+    img.save()
+    world = scene.world or bpy.data.worlds.new("World")
+    scene.world = world
+    world.hud.kind, world.hud.image, world.hud.calibration, world.hud.value = "hdri", img, "mean", 500.0
+    world.hud.rotation_deg = 45.0
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    expected = {
+        "mirror_location_mm": [100.0, 200.0, 300.0], "glass_location_mm": [0.0, 500.0, 0.0],
+        "camera_location_mm": [0.0, -1000.0, 100.0],
+        "camera_up": list(cam.matrix_world.to_3x3().col[1]), "camera_gaze": list(-cam.matrix_world.to_3x3().col[2]),
+        "lens": cam.data.lens, "sensor": cam.data.sensor_width,
+    }
+    disable(module)
+    return expected
+
+
+class _Pass:
+    def __init__(self, channels, n):
+        self.channels, self.n, self.values = channels, n, None
+        self.rect = self
+
+    def foreach_set(self, values):
+        assert len(values) == self.n * self.channels, (len(values), self.n, self.channels)
+        self.values = list(map(float, values[:: max(1, len(values) // 1000)]))
+
+
+class StubEngine:
+    """Stands in for a RenderEngine: test_break turns true after ``stop_after`` calls."""
+
+    def __init__(self, stop_after):
+        self.stop_after, self.calls, self.progress, self.reports, self.passes = stop_after, 0, [], [], {}
+
+    def test_break(self):
+        self.calls += 1
+        return self.calls > self.stop_after
+
+    def update_progress(self, f):
+        self.progress.append(f)
+
+    def update_stats(self, a, b):
+        pass
+
+    def report(self, kind, msg):
+        self.reports.append(msg)
+
+    def add_pass(self, name, channels, chan_id):
+        self.passes[name] = channels
+
+    def begin_result(self, x, y, w, h):
+        class Layer:
+            passes = {"Combined": _Pass(4, w * h), **{k: _Pass(c, w * h) for k, c in self.passes.items()}}
+
+        class Result:
+            layers = [Layer()]
+
+        self.result = Result()
+        return self.result
+
+    def end_result(self, rr):
+        pass
+
+
+def scenario_cancel():
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    scene.hud.method, scene.hud.budget, scene.hud.seconds = "forward", "SECONDS", 600.0
+    engine_mod = sys.modules[f"{module}.hud_addon.engine"]
+    stub = StubEngine(stop_after=1)
+    figures = engine_mod.render_final(stub, bpy.context.evaluated_depsgraph_get())
+    combined = stub.result.layers[0].passes["Combined"].values
+    y = stub.result.layers[0].passes["Y"].values
+    disable(module)
+    return {"figures": figures, "test_break_calls": stub.calls, "combined_sample": combined, "y_sample": y}
+
+
+def scenario_unregister():
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    before = hud_names()
+    props_before = [hasattr(t, "hud") for t in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World)]
+    disable(module)
+    props_after = [hasattr(t, "hud") for t in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World)]
+    engines = bpy.context.scene.render.bl_rna.properties["engine"].enum_items.keys()
+    return {"before": before, "after": hud_names(), "props_before": props_before, "props_after": props_after,
+            "engines": [e for e in ("HUD_TRACER",) if e in engines]}
+
+
+def scenario_save_blend(path, preset):
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset=preset)
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    disable(module)
+    return {"saved": path}
+
+
+if __name__ == "__main__":
+    name, *args = sys.argv[1:]
+    result = globals()[f"scenario_{name}"](*args)
+    print("HUD_RESULT " + json.dumps(result), flush=True)

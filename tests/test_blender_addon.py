@@ -1,0 +1,139 @@
+"""The Blender add-on, tested with the bpy 4.5 module headless (each scenario in its own process;
+see tests/blender_scenarios.py)."""
+
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, render, z_bound
+
+_BPY = importlib.util.find_spec("bpy")
+if _BPY is None:
+    pytest.skip("the bpy 4.5 module is needed for the add-on tests", allow_module_level=True)
+#: Blender's own extension tool, shipped inside the bpy package (found without importing bpy here).
+BLENDER_EXT = Path(_BPY.origin).parent / "4.5/scripts/addons_core/bl_pkg/cli/blender_ext.py"
+
+
+def scenario(*args, timeout=600):
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "blender_scenarios.py"), *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:] + proc.stdout[-3000:]
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("HUD_RESULT "))
+    return json.loads(line[len("HUD_RESULT "):]), proc
+
+
+def read_multilayer(path):
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    spec = inp.spec()
+    px = inp.read_image(oiio.FLOAT)
+    inp.close()
+    return {name: px[:, :, i] for i, name in enumerate(spec.channelnames)}
+
+
+@pytest.fixture(scope="session")
+def extension_zip(tmp_path_factory):
+    """Build the extension zip with Blender's own tool (wheels fetched from PyPI) and validate it."""
+    out = tmp_path_factory.mktemp("dist")
+    subprocess.run([sys.executable, str(ROOT / "tools" / "fetch_wheels.py")], check=True, cwd=ROOT)
+    subprocess.run([sys.executable, str(BLENDER_EXT), "build", "--source-dir", str(ROOT), "--output-dir", str(out)],
+                   check=True, capture_output=True)
+    zip_path = out / "hud_tracer-0.1.0.zip"
+    check = subprocess.run([sys.executable, str(BLENDER_EXT), "validate", str(zip_path)],
+                           capture_output=True, text=True)
+    assert check.returncode == 0, check.stdout + check.stderr
+    return zip_path
+
+
+@pytest.mark.parametrize("method,rays", [("backward", 1_500_000), ("forward", 3_000_000)])
+def test_installed_extension_renders_like_the_tracer(extension_zip, tmp_path, method, rays):
+    """Install the zip, add a preset, F12 with write_still: the Render Result matches the tracer's own
+    render of the exported scene folder within statistical error, and both match L R."""
+    res, _ = scenario("install_render", extension_zip, tmp_path, "analytic-mirror", method, rays, 7)
+    assert res["enabled"] and res["module"].endswith(".hud_tracer")
+    assert res["left_after_disable"] == []
+    ch = read_multilayer(tmp_path / "blender.exr")
+    rgb = np.stack([ch["ViewLayer.Combined.R"], ch["ViewLayer.Combined.G"], ch["ViewLayer.Combined.B"]], -1)
+    y_blender = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    np.testing.assert_allclose(ch["ViewLayer.Y.X"], y_blender, rtol=1e-5, atol=1e-4)
+    y_tracer, var, result = render(tmp_path / "scene", method, rays, seed=7)
+    assert y_blender.shape == y_tracer.shape
+    covered = (y_tracer > 425) & (y_blender > 425)
+    assert covered.sum() > 100
+    sem = math.sqrt(var[covered].sum()) / covered.sum()
+    diff = y_blender[covered].mean() - y_tracer[covered].mean()
+    assert abs(diff) < z_bound(2) * math.sqrt(2) * sem
+    assert abs(y_blender[covered].mean() - 850.0) < z_bound(2) * sem + 0.01 * 850
+    assert res["figures"]["rays"] == result.rays or abs(res["figures"]["rays"] - result.rays) < 0.2 * rays
+
+
+def test_export_round_trip(tmp_path):
+    expected, _ = scenario("roundtrip", tmp_path)
+    data = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    objs = {o["name"]: o for o in data["objects"]}
+    m = np.array(objs["mirror"]["transform"]["matrix"])
+    np.testing.assert_allclose(m[:3, 3], expected["mirror_location_mm"], atol=1e-4)
+    assert objs["mirror"]["material"] == {"type": "mirror", "reflectance": pytest.approx([0.8, 0.7, 0.6], abs=1e-6)}
+    assert objs["mirror"]["smooth_normals"] is True
+    np.testing.assert_allclose(np.array(objs["glass"]["transform"]["matrix"])[:3, 3], expected["glass_location_mm"],
+                               atol=1e-4)
+    assert objs["glass"]["material"]["ior"] == pytest.approx(1.6)
+    led = objs["led"]["material"]
+    assert led["luminance"] == pytest.approx(1234.0) and led["aim"] == {"target": "mirror", "share": pytest.approx(0.7),
+                                                                         "mode": "toward"}
+    eye = data["eye"]
+    np.testing.assert_allclose(eye["position"], expected["camera_location_mm"], atol=1e-4)
+    np.testing.assert_allclose(eye["gaze"], expected["camera_gaze"], atol=1e-6)
+    np.testing.assert_allclose(eye["up"], expected["camera_up"], atol=1e-6)
+    assert eye["pupil_diameter_mm"] == pytest.approx(3.5) and eye["accommodation_distance_mm"] == pytest.approx(2000)
+    assert eye["focal_length_mm"] == pytest.approx(17.0) and eye["resolution"] == [160, 80]
+    fx = 2 * math.degrees(math.atan(expected["sensor"] / (2 * expected["lens"])))
+    assert eye["fov_deg"][0] == pytest.approx(fx)
+    assert eye["fov_deg"][1] == pytest.approx(2 * math.degrees(math.atan(math.tan(math.radians(fx / 2)) / 2)))
+    env = data["environment"]
+    assert env["type"] == "hdri" and env["calibration"] == {"mode": "mean", "value": pytest.approx(500.0)}
+    assert env["rotation_deg"] == pytest.approx(45.0) and (tmp_path / "scene" / env["file"]).is_file()
+    # The exported folder is a valid tracer scene: the mesh positions are in mm.
+    from tracer.scene import load_scene
+
+    sc = load_scene(tmp_path / "scene")
+    np.testing.assert_allclose(sc.object("mirror").vertices.mean(axis=0), expected["mirror_location_mm"], atol=1e-3)
+    assert sc.object("mirror").area_mm2 == pytest.approx(200.0 * 200.0, rel=1e-6)
+    assert sc.environment.mean_luminance == pytest.approx(500.0)
+
+
+def test_cancel_stops_within_one_batch_and_writes_a_clean_result():
+    res, _ = scenario("cancel")
+    f = res["figures"]
+    assert f["partial"] is True and f["batches"] == 1
+    assert res["test_break_calls"] == 2  # checked before each batch: one batch ran, the second check stopped it
+    assert res["combined_sample"] and all(math.isfinite(v) for v in res["combined_sample"])
+    assert all(math.isfinite(v) for v in res["y_sample"])
+
+
+def test_unregister_leaves_nothing_behind_and_the_process_exits():
+    res, proc = scenario("unregister", timeout=120)
+    assert "HUD_OT_add_preset" in res["before"] and res["props_before"] == [True] * 4
+    assert res["after"] == [] and res["props_after"] == [False] * 4
+    assert res["engines"] == []
+
+
+def test_hud_render_renders_a_saved_blend(tmp_path):
+    blend = tmp_path / "mirror.blend"
+    scenario("save_blend", blend, "analytic-mirror")
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), "--rays", "600000",
+                           "--method", "backward", "--seed", "2"], capture_output=True, text=True, timeout=600,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["method"] == "backward" and report["rays"] >= 600_000 and report["seed"] == 2
+    ch = read_multilayer(out / "image.exr")
+    y = ch["ViewLayer.Y.X"]
+    assert np.all(np.isfinite(y)) and abs(y.max() - 850.0) < 0.02 * 850
