@@ -68,6 +68,8 @@ def scenario_roundtrip(out):
     mirror = bpy.context.object
     mirror.name = "mirror"
     mirror.hud.role, mirror.hud.reflectance, mirror.hud.smooth_normals = "mirror", (0.8, 0.7, 0.6), True
+    subdiv = mirror.modifiers.new("subdivide", "SUBSURF")  # exported evaluated: 2 triangles become 8
+    subdiv.subdivision_type, subdiv.levels = "SIMPLE", 1
     bpy.ops.mesh.primitive_cube_add(size=0.1, location=(0.0, 0.5, 0.0))
     glass = bpy.context.object
     glass.name = "glass"
@@ -161,6 +163,30 @@ def scenario_cancel():
     y = stub.result.layers[0].passes["Y"].values
     disable(module)
     return {"figures": figures, "test_break_calls": stub.calls, "combined_sample": combined, "y_sample": y}
+
+
+def scenario_light_paths():
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    bpy.ops.hud.show_light_paths(particles=20000, max_paths=50)
+    obj = bpy.data.objects["HUD light paths"]
+    verts = [tuple(v.co) for v in obj.data.vertices]
+    edges = len(obj.data.edges)
+    eye = tuple(bpy.context.scene.camera.location)
+    disable(module)
+    return {"vertices": verts, "edges": edges, "eye": eye}
+
+
+def scenario_no_light():
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    scene = bpy.context.scene
+    bpy.data.objects["panel"].hud.luminance = 0.0
+    scene.hud.method, scene.hud.budget, scene.hud.rays = "backward", "RAYS", 200_000
+    stub = StubEngine(stop_after=10**9)
+    figures = sys.modules[f"{module}.hud_addon.engine"].render_final(stub, bpy.context.evaluated_depsgraph_get())
+    disable(module)
+    return {"figures": figures, "reports": stub.reports}
 
 
 def scenario_unregister():

@@ -81,6 +81,8 @@ def test_export_round_trip(tmp_path):
     np.testing.assert_allclose(m[:3, 3], expected["mirror_location_mm"], atol=1e-4)
     assert objs["mirror"]["material"] == {"type": "mirror", "reflectance": pytest.approx([0.8, 0.7, 0.6], abs=1e-6)}
     assert objs["mirror"]["smooth_normals"] is True
+    obj_text = (tmp_path / "scene" / objs["mirror"]["mesh"]).read_text()
+    assert sum(line.startswith("f ") for line in obj_text.splitlines()) == 8  # modifiers applied
     np.testing.assert_allclose(np.array(objs["glass"]["transform"]["matrix"])[:3, 3], expected["glass_location_mm"],
                                atol=1e-4)
     assert objs["glass"]["material"]["ior"] == pytest.approx(1.6)
@@ -137,3 +139,18 @@ def test_hud_render_renders_a_saved_blend(tmp_path):
     ch = read_multilayer(out / "image.exr")
     y = ch["ViewLayer.Y.X"]
     assert np.all(np.isfinite(y)) and abs(y.max() - 850.0) < 0.02 * 850
+
+
+def test_show_light_paths_draws_paths_that_end_at_the_eye():
+    res, _ = scenario("light_paths")
+    verts = np.array(res["vertices"])
+    assert res["edges"] > 0 and len(verts) > 0
+    # Every drawn path ends in the pupil: the closest vertices sit at the eye (4 mm pupil, in metres).
+    dist = np.linalg.norm(verts - np.array(res["eye"]), axis=1)
+    assert np.sort(dist)[:10].max() < 0.0021
+
+
+def test_render_reports_no_light_to_the_user():
+    res, _ = scenario("no_light")
+    assert res["figures"]["efficiency"] == 0
+    assert any("no light path found" in r for r in res["reports"])
