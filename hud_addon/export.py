@@ -138,10 +138,15 @@ def eye_spec(scene) -> dict:
     mw = np.array(cam.matrix_world, dtype=np.float64)
     rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)
     acc = cd.hud.accommodation_distance_mm
-    return {"position": (mw[:3, 3] * unit_mm).tolist(), "gaze": (-rot[:, 2]).tolist(), "up": rot[:, 1].tolist(),
-            "pupil_diameter_mm": cd.hud.pupil_diameter_mm, "focal_length_mm": cd.hud.focal_length_mm,
-            "accommodation_distance_mm": acc if acc > 0 else "infinity",
-            "resolution": [w, h], "fov_deg": [math.degrees(2 * fx), math.degrees(2 * fy)]}
+    eye = {"position": (mw[:3, 3] * unit_mm).tolist(), "gaze": (-rot[:, 2]).tolist(), "up": rot[:, 1].tolist(),
+           "pupil_diameter_mm": cd.hud.pupil_diameter_mm, "focal_length_mm": cd.hud.focal_length_mm,
+           "accommodation_distance_mm": acc if acc > 0 else "infinity",
+           "resolution": [w, h], "fov_deg": [math.degrees(2 * fx), math.degrees(2 * fy)]}
+    if cd.hud.pupil == "AUTO":
+        eye.update(pupil_diameter_mm="auto", observer_age=cd.hud.observer_age)
+        if cd.hud.adaptation_luminance > 0:
+            eye["adaptation_luminance_cd_m2"] = cd.hud.adaptation_luminance
+    return eye
 
 
 def environment_spec(scene, folder: Path) -> dict:

@@ -72,7 +72,14 @@ class HudObjectSettings(bpy.types.PropertyGroup):
 
 
 class HudCameraSettings(bpy.types.PropertyGroup):
+    pupil: EnumProperty(name="Pupil", items=[("FIXED", "Fixed", "A given diameter"),
+                                             ("AUTO", "From adaptation", "Watson & Yellott 2012 from the "
+                                              "adaptation luminance")], default="FIXED")
     pupil_diameter_mm: FloatProperty(name="Pupil, mm", default=4.0, min=0.01)
+    adaptation_luminance: FloatProperty(
+        name="Adaptation, cd/m²", default=0.0, min=0.0,
+        description="Luminance the eye is adapted to, cd/m^2; 0: the environment's mean")
+    observer_age: FloatProperty(name="Age, years", default=30.0, min=1.0, max=120.0)
     focal_length_mm: FloatProperty(name="Eye focal length, mm", default=16.67, min=0.1)
     accommodation_distance_mm: FloatProperty(name="Accommodation, mm", default=2500.0, min=0.0,
                                              description="Focus distance, mm; 0 means infinity")

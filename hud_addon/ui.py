@@ -78,7 +78,12 @@ class HUD_PT_eye(_HudPanel, bpy.types.Panel):
     def draw(self, context):
         h = context.camera.hud
         col = self.layout.column()
-        col.prop(h, "pupil_diameter_mm")
+        col.prop(h, "pupil")
+        if h.pupil == "FIXED":
+            col.prop(h, "pupil_diameter_mm")
+        else:
+            col.prop(h, "adaptation_luminance")
+            col.prop(h, "observer_age")
         col.prop(h, "focal_length_mm")
         col.prop(h, "accommodation_distance_mm")
 

@@ -84,6 +84,9 @@ def scenario_roundtrip(out):
     cam.location = (0.0, -1.0, 0.1)
     cam.data.hud.pupil_diameter_mm, cam.data.hud.accommodation_distance_mm = 3.5, 2000.0
     cam.data.hud.focal_length_mm = 17.0
+    scene.hud.seed = 4  # not exported: a render setting
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "fixed_pupil"))
+    cam.data.hud.pupil, cam.data.hud.adaptation_luminance, cam.data.hud.observer_age = "AUTO", 292.0, 30.0
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 160, 50
     img = bpy.data.images.new("sky", 16, 8, float_buffer=True)
     img.pixels.foreach_set([0.5] * (16 * 8 * 4))

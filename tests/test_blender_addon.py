@@ -93,7 +93,9 @@ def test_export_round_trip(tmp_path):
     np.testing.assert_allclose(eye["position"], expected["camera_location_mm"], atol=1e-4)
     np.testing.assert_allclose(eye["gaze"], expected["camera_gaze"], atol=1e-6)
     np.testing.assert_allclose(eye["up"], expected["camera_up"], atol=1e-6)
-    assert eye["pupil_diameter_mm"] == pytest.approx(3.5) and eye["accommodation_distance_mm"] == pytest.approx(2000)
+    fixed = json.loads((tmp_path / "fixed_pupil" / "scene.json").read_text())["eye"]
+    assert fixed["pupil_diameter_mm"] == pytest.approx(3.5) and eye["accommodation_distance_mm"] == pytest.approx(2000)
+    assert eye["pupil_diameter_mm"] == "auto" and eye["adaptation_luminance_cd_m2"] == pytest.approx(292.0)
     assert eye["focal_length_mm"] == pytest.approx(17.0) and eye["resolution"] == [160, 80]
     fx = 2 * math.degrees(math.atan(expected["sensor"] / (2 * expected["lens"])))
     assert eye["fov_deg"][0] == pytest.approx(fx)
@@ -108,6 +110,7 @@ def test_export_round_trip(tmp_path):
     np.testing.assert_allclose(sc.object("mirror").vertices.mean(axis=0), expected["mirror_location_mm"], atol=1e-3)
     assert sc.object("mirror").area_mm2 == pytest.approx(200.0 * 200.0, rel=1e-6)
     assert sc.environment.mean_luminance == pytest.approx(500.0)
+    assert sc.eye.pupil_diameter_mm == pytest.approx(2.61, abs=0.006)  # Watson & Yellott at 292 cd/m^2
 
 
 def test_cancel_stops_within_one_batch_and_writes_a_clean_result():

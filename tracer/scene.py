@@ -14,7 +14,9 @@ scene.json, version 1::
     {
       "format": "hud-scene", "version": 1, "name": "...", "description": "...",
       "eye": {"position": [x, y, z], "gaze": [..], "up": [..],
-              "pupil_diameter_mm": 4.0, "focal_length_mm": 16.67,
+              "pupil_diameter_mm": 4.0,           # or "auto": Watson & Yellott 2012 from
+              "adaptation_luminance_cd_m2": 300,  # this (default: the environment's mean luminance)
+              "observer_age": 30, "focal_length_mm": 16.67,
               "accommodation_distance_mm": 2500.0,           # or "infinity"
               "resolution": [W, H], "fov_deg": [horizontal, vertical]},
       "environment": {"type": "none" | "uniform" | "hdri", ...},   # see tracer.environment
@@ -51,6 +53,7 @@ import numpy as np
 from .environment import Environment, environment_from_spec
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
+from .pupil import pupil_diameter_mm
 from .units import lambertian_luminance_cd_m2, normalize_color
 from .validate import FieldChecker
 
@@ -360,17 +363,28 @@ def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
     return h.hexdigest()[:16]
 
 
-def _eye(ck: FieldChecker, spec) -> EyeSpec:
+def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
-            {"focal_length_mm", "accommodation_distance_mm"})
+            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age"})
     pos = ck.vector(spec["position"], "eye.position")
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")
     if np.linalg.norm(np.cross(gaze, up)) < 1e-6:
         ck.fail("eye.up", "must not be parallel to eye.gaze")
-    pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True)
+    if spec["pupil_diameter_mm"] == "auto":
+        # Watson & Yellott (2012) for the adaptation luminance: given, or the environment's mean.
+        if "adaptation_luminance_cd_m2" in spec:
+            adapt = ck.number(spec["adaptation_luminance_cd_m2"], "eye.adaptation_luminance_cd_m2", min_value=0.0)
+        elif not environment.is_black:
+            adapt = environment.mean_luminance
+        else:
+            ck.fail("eye.pupil_diameter_mm", '"auto" needs eye.adaptation_luminance_cd_m2 or a lit environment')
+        age = ck.number(spec.get("observer_age", 30.0), "eye.observer_age", min_value=1.0, max_value=120.0)
+        pupil = pupil_diameter_mm(adapt, age_years=age)
+    else:
+        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True)
     focal = ck.number(spec.get("focal_length_mm", 16.67), "eye.focal_length_mm", min_value=0.0, min_exclusive=True)
     acc_raw = spec.get("accommodation_distance_mm", "infinity")
     if acc_raw == "infinity":
@@ -450,8 +464,8 @@ def load_scene(path: str | Path) -> Scene:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
     if raw["version"] != VERSION:
         ck.fail("version", f"this tracer reads version {VERSION}, got {json.dumps(raw['version'])}")
-    eye = _eye(ck, raw["eye"])
     env = environment_from_spec(raw.get("environment", {"type": "none"}), root, fname)
+    eye = _eye(ck, raw["eye"], env)
 
     objs_raw = raw["objects"]
     if not isinstance(objs_raw, list):
