@@ -55,7 +55,7 @@ class Accelerator:
         self.center = 0.5 * (allv.min(axis=0) + allv.max(axis=0))
         self.extent = float(np.abs(allv - self.center).max())
         self._scene = EmbreeScene()
-        v0s, ns, offsets = [], [], [0]
+        v0s, e1s, e2s, ns, offsets = [], [], [], [], [0]
         for vertices, faces in meshes:
             local = (vertices - self.center).astype(np.float32)
             TriangleMesh(self._scene, local, np.ascontiguousarray(faces, dtype=np.int32))
@@ -64,8 +64,11 @@ class Accelerator:
             length = np.linalg.norm(n, axis=1, keepdims=True)
             ns.append(np.divide(n, length, out=np.zeros_like(n), where=length > 0))
             v0s.append(tri[:, 0])
+            e1s.append(tri[:, 1] - tri[:, 0])
+            e2s.append(tri[:, 2] - tri[:, 0])
             offsets.append(offsets[-1] + len(faces))
         self._v0 = np.concatenate(v0s)
+        self._e1, self._e2 = np.concatenate(e1s), np.concatenate(e2s)
         self._n = np.concatenate(ns)
         self._offsets = np.array(offsets[:-1], dtype=np.int64)
         self.rays_traced = 0
@@ -97,8 +100,20 @@ class Accelerator:
         t = np.where(ok, num / np.where(ok, denom, 1.0), t)
         t = np.where(hit, t, np.inf)
         points = origins + np.where(hit, t, 0.0)[:, None] * dirs
-        bary = np.stack([res["u"], res["v"]], axis=1).astype(np.float64)
+        bary = self._barycentrics(gface, points)
         return Hits(np.where(hit, obj, -1), face, t, bary, points, ng)
+
+    def _barycentrics(self, gface: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(u, v) of hit points on their triangles, (n, 2), in float64 from the geometry itself: finer
+        than Embree's float32 values and independent of how Embree built its BVH, so a batch gives
+        the same numbers in every process."""
+        e1, e2 = self._e1[gface], self._e2[gface]
+        w = points - self._v0[gface]
+        d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+        w1, w2 = dot(w, e1), dot(w, e2)
+        det = d11 * d22 - d12 * d12
+        det = np.where(det > 0, det, 1.0)
+        return np.stack([(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det], axis=1)
 
     def spawn(self, points: np.ndarray, normals: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """Origins for rays leaving surface ``points`` along ``dirs``: offset along the geometric

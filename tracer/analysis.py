@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from .optics.surfaces import Emitter, Interaction
-from .units import Y_WEIGHTS
+from .units import luminance
 from .vec import dot, norm
 
 #: Branches whose factor falls below this (relative to the chief ray) are dropped.
@@ -163,9 +163,9 @@ def specular_paths(integrator, stride: int | None = None, max_depth: int = 12, d
                 continue
             for d_out, f_branch, label in surf.branches(it):
                 f_new = factor[sel] * f_branch
-                keep = (f_new @ Y_WEIGHTS) > MIN_FACTOR
+                keep = luminance(f_new) > MIN_FACTOR
                 if surf.kind == "lcd":
-                    rel = (f_branch @ Y_WEIGHTS) / float(surf.t_open @ Y_WEIGHTS)
+                    rel = luminance(f_branch) / float(luminance(surf.t_open))
                     lc = np.where(np.isnan(lcd[sel]), rel, lcd[sel])
                 else:
                     lc = lcd[sel]
@@ -186,7 +186,7 @@ def specular_paths(integrator, stride: int | None = None, max_depth: int = 12, d
         lum = np.concatenate([p[1] for p in parts])
         fac = np.concatenate([p[2] for p in parts])
         lc = np.concatenate([p[3] for p in parts])
-        paths.append({"path": " > ".join(names[s]), "pixel": own, "luminance": lum, "factor": fac @ Y_WEIGHTS,
+        paths.append({"path": " > ".join(names[s]), "pixel": own, "luminance": lum, "factor": luminance(fac),
                       "lcd": lc})
-    paths.sort(key=lambda p: -float((p["luminance"] @ Y_WEIGHTS).sum()))
+    paths.sort(key=lambda p: -float(luminance(p["luminance"]).sum()))
     return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths}

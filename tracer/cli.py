@@ -8,6 +8,7 @@ with Ctrl-C (what was accumulated is written, marked ``"partial": true``).
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import signal
 import sys
@@ -90,7 +91,8 @@ def cmd_render(args) -> int:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene_dir = _resolve_scene(args.scene, Path(tmp))
             report, result = render_folder(scene_dir, args.method, budget, args.seed, args.out,
-                                           progress=bar, should_stop=flag, batch_size=args.batch_size)
+                                           progress=bar, should_stop=flag, batch_size=args.batch_size,
+                                           workers=args.workers)
     finally:
         signal.signal(signal.SIGINT, previous)
         if bar:
@@ -156,6 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--out", required=True, help="output folder (image.exr, preview.png, report.json)")
     r.add_argument("--batch-size", type=int, default=None, help="rays per batch (default 131072)")
+    r.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes (default: one per core); with --rays the image does not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_render)
     p = sub.add_parser("presets", help="list the presets")

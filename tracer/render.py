@@ -21,9 +21,10 @@ from . import __version__
 from .analysis import specular_paths
 from .imageio import write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
+from .parallel import render_parallel
 from .scene import Scene, load_scene
 from .tonemap import log_average_luminance, tonemap_ward
-from .units import Y_WEIGHTS
+from .units import luminance
 
 #: Median relative standard error of the lit pixels above which the report warns of noise.
 NOISY = 0.5
@@ -66,7 +67,7 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
     total = np.zeros(npts)
     per_path = []
     for p in res["paths"]:
-        y = p["luminance"] @ Y_WEIGHTS
+        y = luminance(p["luminance"])
         np.add.at(total, p["pixel"], y)
         per_path.append(y)
     out: dict = {
@@ -153,7 +154,7 @@ def adaptation_luminance(y: np.ndarray) -> float:
 
 def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
                  budget: Budget, analysis: dict | None) -> dict:
-    y = image @ Y_WEIGHTS
+    y = luminance(image)
     rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
     lit = y > 1e-6 * max(float(y.max()), 1e-300)
     median_err = float(np.median(rel_err[lit])) if lit.any() else None
@@ -173,6 +174,7 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "paths": result.paths,
         "paths_found_light": result.found,
         "batches": result.batches,
+        "workers": result.extra.get("workers", 1),
         "seconds": result.seconds,
         "rays_per_second": result.rays_per_second,
         "efficiency": result.efficiency,
@@ -194,18 +196,23 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
 
 
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
-                 progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True):
-    """Render ``scene`` with ``method`` into ``out_dir``; returns (report dict, RenderResult)."""
+                 progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
+                 workers: int = 1):
+    """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
+    (report dict, RenderResult)."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
     kwargs = {"batch_size": batch_size} if batch_size else {}
     integrator = INTEGRATORS[method](scene, seed, **kwargs)
-    result = integrator.render(budget, progress, should_stop)
+    if workers > 1:
+        result = render_parallel(integrator, budget, workers, progress, should_stop)
+    else:
+        result = integrator.render(budget, progress, should_stop)
     image = result.film.rgb()
     var_y = result.film.variance_y()
     if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
         raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
-    y = image @ Y_WEIGHTS
+    y = luminance(image)
     preview, info = tonemap_ward(image, adaptation_luminance(y))
     analysis = brightness_theorem(integrator, y, var_y) if analyse and integrator.accel is not None else None
     report = build_report(scene, result, image, var_y, info, budget, analysis)

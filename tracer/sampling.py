@@ -491,7 +491,8 @@ def sample_triangles(
     tri_index, _ = sample_discrete(triangle_areas(tris), u[:, 0])
     b12 = uniform_triangle(u[:, 1:])
     bary = np.concatenate([1.0 - np.sum(b12, axis=-1, keepdims=True), b12], axis=-1)
-    points = np.einsum("nk,nkj->nj", bary, tris[tri_index])
+    t = tris[tri_index]
+    points = bary[:, :1] * t[:, 0] + bary[:, 1:2] * t[:, 1] + bary[:, 2:3] * t[:, 2]  # fixed summation order
     return points, tri_index, bary
 
 

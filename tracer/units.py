@@ -18,8 +18,10 @@ MM2_TO_M2 = 1e-6
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Y of linear Rec.709 RGB; ``rgb`` has shape (..., 3), the result shape (...)."""
-    return np.asarray(rgb, dtype=np.float64) @ Y_WEIGHTS
+    """Y of linear Rec.709 RGB; ``rgb`` has shape (..., 3), the result shape (...). Summed term by
+    term (not with BLAS), so the result does not depend on memory alignment."""
+    c = np.asarray(rgb, dtype=np.float64)
+    return c[..., 0] * Y_WEIGHTS[0] + c[..., 1] * Y_WEIGHTS[1] + c[..., 2] * Y_WEIGHTS[2]
 
 
 def normalize_color(rgb) -> np.ndarray:

@@ -20,8 +20,8 @@ import math
 import numpy as np
 
 from ..sampling import uniform_disk_concentric
-from ..units import Y_WEIGHTS
-from ..vec import max3
+from ..units import luminance
+from ..vec import dot, max3
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
@@ -76,8 +76,8 @@ class BackwardTracer(Integrator):
             ip = in_p[todo]
             cand = uniform_disk_concentric(rng.random((len(todo), 2)))
             cand = np.where(ip[:, None], c + r * cand, a * cand)
-            in_pupil = np.einsum("ij,ij->i", cand, cand) <= a * a
-            in_stop = np.einsum("ij,ij->i", cand - c, cand - c) <= r * r
+            in_pupil = dot(cand, cand) <= a * a
+            in_stop = dot(cand - c, cand - c) <= r * r
             ok = np.where(ip, in_pupil, ~in_stop)
             xy[todo[ok]] = cand[ok]
             todo = todo[~ok]
@@ -101,7 +101,7 @@ class BackwardTracer(Integrator):
         if accel is None:  # nothing but the environment
             self.rays_without_geometry += n
             radiance += thr * env.radiance(dirs)
-            found |= radiance @ Y_WEIGHTS > 0
+            found |= luminance(radiance) > 0
             idx = idx[:0]
         for depth in range(self.max_depth):
             if len(idx) == 0:
@@ -111,7 +111,7 @@ class BackwardTracer(Integrator):
             if np.any(miss) and not env.is_black:
                 le = env.radiance(dirs[miss])
                 radiance[idx[miss]] += thr[miss] * le
-                found[idx[miss]] |= le @ Y_WEIGHTS > 0
+                found[idx[miss]] |= luminance(le) > 0
             next_o, next_d, next_t, next_i = [], [], [], []
             for slot in np.unique(hits.obj[hits.hit]):
                 sel = np.nonzero(hits.obj == slot)[0]
@@ -120,7 +120,7 @@ class BackwardTracer(Integrator):
                 if surf.emits:
                     le = surf.emitted(it)
                     radiance[idx[sel]] += thr[sel] * le
-                    found[idx[sel]] |= le @ Y_WEIGHTS > 0
+                    found[idx[sel]] |= luminance(le) > 0
                 if surf.terminal:
                     continue
                 d_out, factor, alive = surf.scatter(it, rng, radiance=True)

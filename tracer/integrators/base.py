@@ -22,7 +22,7 @@ from ..eye import ThinLensEye
 from ..optics.surfaces import Interaction, Surface, make_surface
 from ..sampling import make_rng
 from ..scene import Scene
-from ..units import Y_WEIGHTS
+from ..units import luminance
 from ..vec import dot, norm
 
 #: Rays per batch (structure of arrays, one Embree call per bounce).
@@ -85,7 +85,7 @@ class Film:
         n = self.width * self.height
         for c in range(3):
             self.sum_rgb[:, c] += np.bincount(pixels, weights=values[:, c], minlength=n)
-        y = values @ Y_WEIGHTS
+        y = luminance(values)
         self.sum_y2 += np.bincount(pixels, weights=y * y, minlength=n)
 
     def merge(self, other: Film):
@@ -101,7 +101,7 @@ class Film:
     def variance_y(self) -> np.ndarray:
         """(H, W) variance of the pixel's mean luminance, (cd/m^2)^2."""
         s = max(self.samples, 1)
-        mean_y = (self.sum_rgb @ Y_WEIGHTS) / s
+        mean_y = luminance(self.sum_rgb) / s
         var = np.maximum(self.sum_y2 / s - mean_y**2, 0.0) / s
         return var.reshape(self.height, self.width)
 
@@ -213,7 +213,11 @@ class Integrator:
                 partial = True
                 break
             rays_before = self.rays_traced
-            p, f = self.run_batch(make_rng(self.seed, batches), film)
+            # Each batch fills its own film, merged in batch order: the same additions, in the same
+            # order, as a multi-process render (tracer.parallel), so both give identical images.
+            batch_film = Film(film.width, film.height)
+            p, f = self.run_batch(make_rng(self.seed, batches), batch_film)
+            film.merge(batch_film)
             paths += p
             found += f
             batches += 1
