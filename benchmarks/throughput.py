@@ -1,16 +1,20 @@
 """Rays per second of the tracer end to end against the raw embreex intersection rate, measured in
-the same run on the same geometry (the hud-direct preset unless another scene is named).
+the same run on the same geometry (the hud-direct preset unless another scene is named), on one
+process and on several.
 
-    .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S]
+    .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S] [--workers W]
 
 Raw rate: one Embree call on 2^20 rays with random origins in the scene's bounding box and random
 directions, repeated, counting rays / second (the ceiling for one core). End to end: the forward
-and the backward method for S seconds each (everything: sampling, shading, film).
+and the backward method for S seconds each (everything: sampling, shading, film), on one process
+and on W worker processes (tracer.parallel; the time includes starting the workers). Peak memory is
+the largest resident set of this process and of its workers.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import sys
 import tempfile
 import time
@@ -23,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from presets import PRESETS  # noqa: E402
 from tracer.accel import Accelerator  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.parallel import render_parallel  # noqa: E402
 from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 
@@ -48,6 +53,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
@@ -58,6 +64,13 @@ def main():
             res = INTEGRATORS[method](scene, 1).render(Budget(seconds=args.seconds))
             print(f"{method:8s} end to end: {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
                   f"{res.seconds:.1f} s) = {res.rays_per_second / raw:.2f} of raw; efficiency {res.efficiency:.3g}")
+            par = render_parallel(INTEGRATORS[method](scene, 1), Budget(seconds=args.seconds), args.workers)
+            print(f"{method:8s} on {args.workers} processes: {par.rays_per_second:,.0f} rays/s "
+                  f"({par.rays:,} rays in {par.seconds:.1f} s) = {par.rays_per_second / res.rays_per_second:.2f} x "
+                  "one process")
+        own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        print(f"peak memory: {own:.0f} MiB (this process), {kids:.0f} MiB (largest worker)")
 
 
 if __name__ == "__main__":

@@ -146,3 +146,17 @@ def test_meshes_load_from_ply_and_glb(preset, ext):
                                np.sort(src.triangles.reshape(-1, 3), axis=0), atol=1e-4)
     y, var, _ = render(folder, "backward", 300_000)
     assert y.max() == pytest.approx(850.0, rel=0.01)
+
+
+@pytest.mark.parametrize("method", ["forward", "backward"])
+def test_two_processes_give_the_same_image_as_one(preset, method):
+    """Seed-addressed batches merged in order: identical films on one and on two processes."""
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import merge_equal, render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("hud-direct")
+    one = INTEGRATORS[method](load_scene(folder), 9).render(Budget(rays=2_500_000))
+    two = render_parallel(INTEGRATORS[method](load_scene(folder), 9), Budget(rays=2_500_000), workers=2)
+    assert one.batches == two.batches and one.rays == two.rays and one.found == two.found
+    assert merge_equal(one, two)
