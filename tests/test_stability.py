@@ -1,0 +1,134 @@
+"""Stability where methods fail: the answer degrades honestly (efficiency falls, the report warns),
+never into NaN, Inf or a silent black image; and the error of unbiased methods falls as N^-1/2."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import edit_json, render
+
+from presets._build import SceneBuilder, box, frame_matrix, rectangle
+from tracer.errors import SceneError
+from tracer.imageio import write_exr
+from tracer.integrators import Budget
+from tracer.render import render_folder
+from tracer.scene import load_scene
+
+
+def _report(folder, method, rays, tmp_path, seed=1):
+    report, _ = render_folder(folder, method, Budget(rays=rays), seed, tmp_path / f"out-{method}-{seed}")
+    assert all(math.isfinite(v) for v in (report["luminance"]["mean"], report["luminance"]["max"]))
+    return report
+
+
+def _panel_in_view(folder, panel_mm: float, pupil_mm: float, screen: bool = False):
+    """A Lambertian panel 50 mm in front of the eye (behind a diffuse screen at 40 mm if ``screen``),
+    without aiming: the plain methods, as the paper describes them."""
+    sb = SceneBuilder(folder, "panel", "a panel in view")
+    sb.add("panel", rectangle(panel_mm, panel_mm)[:2], {"type": "emitter", "luminance": 100.0},
+           frame_matrix([0, 50, 0], [1, 0, 0], [0, -1, 0]))
+    if screen:
+        sb.add("screen", rectangle(100.0, 100.0)[:2], {"type": "lambertian_transmitter", "transmittance": 0.8},
+               frame_matrix([0, 40, 0], [1, 0, 0], [0, -1, 0]))
+    return sb.write(eye={"position": [0, 0, 0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": pupil_mm,
+                         "accommodation_distance_mm": 50.0, "resolution": [8, 8], "fov_deg": [90.0, 90.0]})
+
+
+def test_backward_with_a_shrinking_source(tmp_path):
+    """A source behind a diffuse screen shrinks toward a point (the paper's LED behind a scatterer):
+    backward efficiency falls with its area, the report warns once the image is noise, and nothing
+    becomes NaN."""
+    effs, warned = [], []
+    for size in (20.0, 2.0, 0.2, 0.02):
+        folder = _panel_in_view(tmp_path / f"src{size}", size, 4.0, screen=True)
+        report = _report(folder, "backward", 400_000, tmp_path)
+        effs.append(report["efficiency"])
+        warned.append(bool(report["warnings"]))
+    assert effs[0] > effs[1] > effs[2] >= effs[3]
+    assert effs[1] == pytest.approx(effs[0] / 100, rel=0.5)
+    assert not warned[0] and warned[2] and warned[3]
+
+
+def test_forward_with_a_shrinking_pupil(tmp_path):
+    """The pupil shrinks toward a pinhole: forward efficiency falls with its area, the report warns,
+    and a zero pupil is refused with the field named."""
+    effs, warned = [], []
+    for pupil in (4.0, 0.4, 0.04):
+        report = _report(_panel_in_view(tmp_path / f"pupil{pupil}", 100.0, pupil), "forward", 2_000_000, tmp_path)
+        effs.append(report["efficiency"])
+        warned.append(bool(report["warnings"]))
+    assert effs[0] > effs[1] > effs[2]
+    assert effs[1] == pytest.approx(effs[0] / 100, rel=0.5)
+    assert not warned[0] and warned[2]
+    folder = _panel_in_view(tmp_path / "pinhole", 100.0, 1.0)
+    edit_json(folder, lambda d: d["eye"].update(pupil_diameter_mm=0.0))
+    with pytest.raises(SceneError, match="eye.pupil_diameter_mm"):
+        load_scene(folder)
+
+
+def test_hdri_with_a_sun_of_1e9(preset, tmp_path):
+    """A 1e9 cd/m^2 sun in a 1 cd/m^2 sky: finite everywhere, and the error falls with the budget."""
+    folder = preset("analytic-furnace", resolution=(8, 8), fov_deg=(90.0, 90.0))
+    sky = np.ones((64, 128), np.float32)
+    sky[20:22, 60:62] = 1e9  # a sun high in front of the eye (Blender's mapping: +y at u = 0.25)
+    write_exr(folder / "sky.exr", {"R": sky, "G": sky, "B": sky})
+    edit_json(folder, lambda d: d.update(objects=[], environment={
+        "type": "hdri", "file": "sky.exr", "calibration": {"mode": "scale", "value": 1.0}}))
+    ref, _, _ = render(folder, "backward", 6_000_000, seed=100)
+    errors = []
+    for rays in (200_000, 800_000):
+        y, var, _ = render(folder, "backward", rays, seed=7)
+        assert np.all(np.isfinite(y)) and np.all(np.isfinite(var))
+        errors.append(math.sqrt(np.mean((y - ref) ** 2)) / ref.mean())
+    assert errors[1] < errors[0]
+
+
+def _glass_block(folder, eye_inside=False, grazing=False):
+    """A 20 mm glass block in front of a panel; the eye outside, or inside the glass."""
+    sb = SceneBuilder(folder, "glass", "a glass block")
+    sb.add("glass", box(200.0, 20.0, 200.0), {"type": "dielectric", "ior": 1.5},
+           frame_matrix([0, 50, 0], [1, 0, 0], [0, 0, 1]))
+    sb.add("panel", rectangle(400.0, 400.0)[:2], {"type": "emitter", "luminance": 100.0},
+           frame_matrix([0, 200, 0], [1, 0, 0], [0, -1, 0]))
+    gaze = [0, 1, 0] if not grazing else [0.9990482, 0.0436194, 0]  # 87.5 deg from the block's normal
+    return sb.write(eye={"position": [0, 50 if eye_inside else 0, 0], "gaze": gaze, "up": [0, 0, 1],
+                         "pupil_diameter_mm": 3.0, "accommodation_distance_mm": 500.0,
+                         "resolution": [8, 8], "fov_deg": [4.0, 4.0]})
+
+
+def test_glass_block_transmits_fresnel_and_eye_inside_glass(tmp_path):
+    """Through a block (two surfaces at normal incidence) the panel reads L T^2 (plus the small
+    inter-reflections); from inside the glass, where the eye sees the panel through one surface,
+    radiance is L T n^2 in the glass (the n^2 law, Veach 1997 ch. 5). No NaN at total internal
+    reflection or on rays starting on a surface."""
+    r = ((1.5 - 1) / 2.5) ** 2
+    t = 1 - r
+    outside = _glass_block(tmp_path / "outside")
+    y, var, _ = render(outside, "backward", 300_000)
+    expected = 100.0 * t * t / (1 - r * r)  # incoherent sum of all inter-reflections
+    assert y.mean() == pytest.approx(expected, rel=0.01)
+    inside = _glass_block(tmp_path / "inside", eye_inside=True)
+    y, var, _ = render(inside, "backward", 300_000)
+    assert np.all(np.isfinite(y))
+    assert y.mean() == pytest.approx(100.0 * t * 1.5**2 / (1 - r * r), rel=0.02)
+
+
+def test_grazing_incidence_stays_finite(tmp_path):
+    folder = _glass_block(tmp_path / "grazing", grazing=True)
+    for method in ("backward", "forward"):
+        y, var, res = render(folder, method, 200_000)
+        assert np.all(np.isfinite(y)) and np.all(np.isfinite(var))
+
+
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_error_falls_as_one_over_root_n(preset, method):
+    """log RMSE against log rays has slope in [-0.6, -0.4]: the furnace, whose every pixel is exactly
+    L0 = 100 cd/m^2, so the error is the estimator's alone (squared errors averaged over 4 seeds)."""
+    folder = preset("analytic-furnace", resolution=(12, 8))
+    budgets = [100_000, 400_000, 1_600_000]
+    errs = []
+    for rays in budgets:
+        mse = np.mean([np.mean((render(folder, method, rays, seed=s)[0] - 100.0) ** 2) for s in range(4)])
+        errs.append(math.sqrt(mse) / 100.0)
+    slope = np.polyfit(np.log(budgets), np.log(errs), 1)[0]
+    assert -0.6 <= slope <= -0.4, (slope, errs)
