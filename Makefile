@@ -35,3 +35,11 @@ extension: $(STAMP)
 	mkdir -p dist
 	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
 	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip
+
+# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 15 minutes on 2 cores).
+.PHONY: bench
+bench: $(STAMP)
+	$(PY) -m pip install --quiet -r requirements-bench.lock
+	$(PY) benchmarks/convergence.py
+	$(PY) benchmarks/throughput.py --seconds 20
+	$(PY) benchmarks/eyebox.py --half 90 30 --step 10

@@ -160,3 +160,19 @@ def test_two_processes_give_the_same_image_as_one(preset, method):
     two = render_parallel(INTEGRATORS[method](load_scene(folder), 9), Budget(rays=2_500_000), workers=2)
     assert one.batches == two.batches and one.rays == two.rays and one.found == two.found
     assert merge_equal(one, two)
+
+
+def test_dask_cluster_gives_the_same_image(preset):
+    """The same seed-addressed batches on a Dask LocalCluster merge to the local image."""
+    distributed = pytest.importorskip("distributed")
+    from tracer.distributed import render_dask
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import merge_equal
+    from tracer.scene import load_scene
+
+    folder = preset("hud-direct")
+    one = INTEGRATORS["forward"](load_scene(folder), 4).render(Budget(rays=2_000_000))
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    with cluster, distributed.Client(cluster) as client:
+        dask = render_dask(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=2_000_000), client)
+    assert dask.batches == one.batches and merge_equal(one, dask)

@@ -1,7 +1,8 @@
 """Rendering on several cores: seed-addressed batches in worker processes, merged exactly.
 
 Batch k of a render draws its random numbers from ``make_rng(seed, k)`` only (see
-:mod:`tracer.integrators.base`), so its film does not depend on which process traced it. Workers
+:mod:`tracer.integrators.base`), so its film does not depend on which process traced it. The same
+driver (:func:`drive`) serves local processes here and Dask clusters in :mod:`tracer.distributed`. Workers
 (started with "spawn", each with its own copy of the scene and its own Embree scene) trace batches
 handed out in increasing order; the parent keeps every batch's film apart until the contiguous
 prefix 0..B-1 meets the budget, the same rule a single process applies, and adds exactly that prefix
@@ -41,59 +42,76 @@ def _run_batch(index: int):
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
     folder, method, seed and batch size; see the module docstring)."""
-    scene_dir, method, seed, batch_size = str(Path(local.scene.root)), local.name, local.seed, local.batch_size
-    ctx = mp.get_context("spawn")
+    init = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size)
+    with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=init) as pool:
+        result = drive(local, budget, lambda k: _PoolTask(pool.apply_async(_run_batch, (k,))), 2 * workers,
+                       progress, should_stop, f"x{workers}")
+        if result.partial:
+            pool.terminate()  # cancelled: drop what is still in flight
+    result.extra["workers"] = workers
+    return result
+
+
+class _PoolTask:
+    def __init__(self, async_result):
+        self._r = async_result
+
+    def done(self) -> bool:
+        return self._r.ready()
+
+    def result(self):
+        return self._r.get()
+
+
+def drive(local, budget: Budget, submit, in_flight: int, progress=None, should_stop=None,
+          label: str = "") -> RenderResult:
+    """Hand out batch indices in increasing order through ``submit(k)`` (which returns an object with
+    ``done()`` and ``result()``, the tuple of :func:`_run_batch`), keep at most ``in_flight`` running,
+    and merge the contiguous prefix of finished batches in order until the budget is met: the rule of
+    a single-process render, so the merged film is the same."""
+    method = local.name
     done: dict[int, tuple] = {}
+    pending: dict[int, object] = {}
     film = Film(local.eye.width, local.eye.height)
-    rays = paths = found = truncated = merged = 0
+    rays = paths = found = truncated = merged = next_index = 0
     partial = False
     start = time.perf_counter()
-    with ctx.Pool(workers, initializer=_init_worker, initargs=(scene_dir, method, seed, batch_size)) as pool:
-        pending = {}
-        next_index = 0
-        while True:
-            elapsed = time.perf_counter() - start
-            budget_met = budget.fraction(rays, elapsed) >= 1.0
-            if should_stop is not None and not budget_met and should_stop():
-                partial = True
-                budget_met = True
-            if not budget_met:
-                while len(pending) < 2 * workers:
-                    pending[next_index] = pool.apply_async(_run_batch, (next_index,))
-                    next_index += 1
-            elif not pending:
-                break
-            finished = [k for k, r in pending.items() if r.ready()]
-            if not finished:
-                time.sleep(0.002)
-                continue
-            for k in finished:
-                done[k] = pending.pop(k).get()
-            # Merge the contiguous prefix, in batch order, while the budget is not yet met.
-            while merged in done and budget.fraction(rays, time.perf_counter() - start) < 1.0:
-                _, s_rgb, s_y2, samples, p, f, r, t = done.pop(merged)
-                film.sum_rgb += s_rgb
-                film.sum_y2 += s_y2
-                film.samples += samples
-                paths, found, rays, truncated = paths + p, found + f, rays + r, truncated + t
-                merged += 1
-                if progress is not None:
-                    eff = found / paths if paths else 0.0
-                    progress(budget.fraction(rays, time.perf_counter() - start),
-                             f"{method} x{workers}: {rays:,} rays, efficiency {eff:.2e}, "
-                             f"{time.perf_counter() - start:.1f} s")
-            if rays == 0 and merged > 0:
-                break  # nothing to trace
-            if budget_met and partial:
-                # Cancelled: keep what is merged, drop what is still in flight.
-                pool.terminate()
-                break
-    seconds = time.perf_counter() - start
-    result = RenderResult(method, seed, film, rays, paths, found, seconds, partial, merged, list(local.warnings))
+    while True:
+        budget_met = budget.fraction(rays, time.perf_counter() - start) >= 1.0
+        if should_stop is not None and not budget_met and should_stop():
+            partial = budget_met = True
+        if partial:
+            break
+        if not budget_met:
+            while len(pending) < in_flight:
+                pending[next_index] = submit(next_index)
+                next_index += 1
+        elif not pending:
+            break
+        finished = [k for k, f in pending.items() if f.done()]
+        if not finished:
+            time.sleep(0.002)
+            continue
+        for k in finished:
+            done[k] = pending.pop(k).result()
+        while merged in done and budget.fraction(rays, time.perf_counter() - start) < 1.0:
+            _, s_rgb, s_y2, samples, p, f, r, t = done.pop(merged)
+            film.sum_rgb += s_rgb
+            film.sum_y2 += s_y2
+            film.samples += samples
+            paths, found, rays, truncated = paths + p, found + f, rays + r, truncated + t
+            merged += 1
+            if progress is not None:
+                eff = found / paths if paths else 0.0
+                progress(budget.fraction(rays, time.perf_counter() - start),
+                         f"{method} {label}: {rays:,} rays, efficiency {eff:.2e}, {time.perf_counter() - start:.1f} s")
+        if rays == 0 and merged > 0:
+            break  # nothing to trace
+    result = RenderResult(method, local.seed, film, rays, paths, found, time.perf_counter() - start, partial,
+                          merged, list(local.warnings))
     if hasattr(local, "truncated"):
         local.truncated = truncated
     local.finish(result)
-    result.extra["workers"] = workers
     return result
 
 

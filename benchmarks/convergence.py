@@ -1,0 +1,157 @@
+"""Speed against accuracy: relative RMSE against wall time for every preset and every method.
+
+    .venv/bin/python benchmarks/convergence.py [--presets P ...] [--budgets 1 2 4 8 16] [--ref-seconds 120]
+
+For each preset a high-sample reference image is rendered once and cached by scene hash in
+benchmarks/cache/ (not committed): the method the preset is made for (forward for hud-direct,
+backward for the analytic scenes), seed 1000 and up, on every core, for --ref-seconds (the analytic
+scenes get a third of it). Then every method renders at each budget in seconds (one process, seed =
+budget index), and the script records wall time, rays, the method's own efficiency, the relative RMSE
+against the reference over the whole image and over the bright region (pixels above 10 % of the
+reference's 99th percentile: the symbols of hud-direct, the lit panel of analytic-mirror), with the
+reference's own noise subtracted from the mean squared error, and the time efficiency
+1 / (relative MSE x seconds). Output: benchmarks/results/<preset>.csv, docs/convergence-<preset>.png
+(log-log, one line per method, slope -1/2 drawn through each method's first point) and
+benchmarks/results/summary.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from presets import PRESETS  # noqa: E402
+from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.parallel import render_parallel  # noqa: E402
+from tracer.scene import load_scene  # noqa: E402
+from tracer.units import luminance  # noqa: E402
+
+CACHE = ROOT / "benchmarks" / "cache"
+RESULTS = ROOT / "benchmarks" / "results"
+DOCS = ROOT / "docs"
+REFERENCE_METHOD = {"hud-direct": "forward"}  # the rest: backward
+#: The paper's figure for hud-direct (sec. 4.2): forward 4 hours, backward 2 days.
+PAPER_FORWARD_H, PAPER_BACKWARD_H = 4.0, 48.0
+
+
+def reference(name: str, folder: Path, seconds: float, workers: int) -> dict:
+    scene = load_scene(folder)
+    method = REFERENCE_METHOD.get(name, "backward")
+    path = CACHE / f"{name}-{scene.scene_hash}-{method}-{seconds:g}s.npz"
+    if path.is_file():
+        data = np.load(path)
+        return {k: data[k] for k in data.files}
+    res = render_parallel(INTEGRATORS[method](scene, 1000), Budget(seconds=seconds), workers)
+    y = luminance(res.film.rgb())
+    ref = {"y": y, "var": res.film.variance_y(), "rays": np.array(res.rays), "method": np.array(method),
+           "seconds": np.array(res.seconds)}
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, **ref)
+    return ref
+
+
+def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[dict]:
+    scene = load_scene(folder)
+    y_ref, var_ref = ref["y"], ref["var"]
+    region = y_ref > 0.1 * np.percentile(y_ref, 99)
+    rows = []
+    for method in INTEGRATORS:
+        for k, seconds in enumerate(budgets):
+            start = time.perf_counter()
+            res = INTEGRATORS[method](scene, k).render(Budget(seconds=seconds))
+            wall = time.perf_counter() - start
+            y = luminance(res.film.rgb())
+            row = {"preset": name, "method": method, "budget_s": seconds, "seconds": wall, "rays": res.rays,
+                   "paths": res.paths, "method_efficiency": res.efficiency}
+            for label, mask in (("image", np.ones_like(region)), ("region", region)):
+                mean = float(y_ref[mask].mean())
+                mse = max(float(np.mean((y[mask] - y_ref[mask]) ** 2) - np.mean(var_ref[mask])), 0.0)
+                rel_mse = mse / mean**2
+                row[f"rel_rmse_{label}"] = math.sqrt(rel_mse)
+                row[f"time_efficiency_{label}"] = 1.0 / (rel_mse * wall) if rel_mse > 0 else math.inf
+            rows.append(row)
+            print(f"{name:17s} {method:9s} {seconds:5.1f} s  rays {res.rays:>11,}  rel RMSE image "
+                  f"{row['rel_rmse_image']:.3g}  region {row['rel_rmse_region']:.3g}", flush=True)
+    return rows
+
+
+def chart(name: str, rows: list[dict], ref: dict):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for i, method in enumerate(INTEGRATORS):
+        r = [x for x in rows if x["method"] == method and x["rel_rmse_image"] > 0]
+        if not r:
+            continue
+        t = np.array([x["seconds"] for x in r])
+        e = np.array([x["rel_rmse_image"] for x in r])
+        er = np.array([x["rel_rmse_region"] for x in r])
+        color = f"C{i}"
+        ax.loglog(t, e, "o-", color=color, label=f"{method}: whole image")
+        ax.loglog(t, er, "s:", color=color, label=f"{method}: bright region")
+        ax.loglog(t, e[0] * (t / t[0]) ** -0.5, "--", color="0.6", lw=0.8)
+    ax.set_xlabel("wall time, s (one process)")
+    ax.set_ylabel("relative RMSE against the reference")
+    ax.set_title(f"{name}: reference {str(ref['method'])} {float(ref['seconds']):.0f} s, "
+                 f"{int(ref['rays']):,} rays; grey: slope -1/2", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    DOCS.mkdir(exist_ok=True)
+    fig.savefig(DOCS / f"convergence-{name}.png", dpi=110)
+    plt.close(fig)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--presets", nargs="*", default=list(PRESETS))
+    ap.add_argument("--budgets", type=float, nargs="*", default=[1, 2, 4, 8, 16])
+    ap.add_argument("--ref-seconds", type=float, default=120.0)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    notes = []
+    summary = ["| preset | method | seconds | rays | rel. RMSE image | rel. RMSE bright region | "
+               "1/(rel. MSE x s) image |", "|---|---|---|---|---|---|---|"]
+    for name in args.presets:
+        folder = PRESETS[name].write(CACHE / "scenes" / name) if not (CACHE / "scenes" / name).exists() \
+            else CACHE / "scenes" / name
+        ref_seconds = args.ref_seconds if name in REFERENCE_METHOD else args.ref_seconds / 3
+        ref = reference(name, folder, ref_seconds, args.workers)
+        rows = measure(name, folder, ref, args.budgets)
+        with open(RESULTS / f"{name}.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        chart(name, rows, ref)
+        for r in rows:
+            if r["budget_s"] == max(args.budgets):
+                summary.append(f"| {name} | {r['method']} | {r['seconds']:.1f} | {r['rays']:,} | "
+                               f"{r['rel_rmse_image']:.3g} | {r['rel_rmse_region']:.3g} | "
+                               f"{r['time_efficiency_image']:.3g} |")
+        if name == "hud-direct":
+            last = {r["method"]: r for r in rows if r["budget_s"] == max(args.budgets)}
+            if {"forward", "backward"} <= set(last):
+                ratio = last["forward"]["time_efficiency_region"] / last["backward"]["time_efficiency_region"]
+                notes.append(f"hud-direct, symbols: forward is {ratio:.0f} times as efficient as backward "
+                             f"(1/(MSE x time)); the paper: {PAPER_BACKWARD_H / PAPER_FORWARD_H:.0f} times the time "
+                             "(4 hours against 2 days), i.e. 2-3 orders of magnitude in its words.")
+    text = "\n".join(summary) + "\n\n" + "\n".join(notes) + "\n"
+    (RESULTS / "summary.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

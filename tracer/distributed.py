@@ -1,0 +1,68 @@
+"""The seed-addressed batches of :mod:`tracer.parallel` on a Dask distributed cluster.
+
+    from dask.distributed import Client
+    client = Client("tcp://scheduler:8786")          # or a LocalCluster
+    result = render_dask(integrator, Budget(rays=10**9), client)
+
+The scene folder travels once to the cluster, zipped in memory (no shared file system is needed);
+each worker unpacks it once, builds its own integrator and Embree scene, and traces the batches it
+is given. The parent merges films in batch order with the same rule as a local render, so the same
+seeds give the same image as one process. Dask is optional: ``pip install "dask[distributed]"``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import tempfile
+import zipfile
+from pathlib import Path
+
+from .integrators import INTEGRATORS, Budget, RenderResult
+from .parallel import _WORKER, _run_batch, drive
+from .scene import load_scene
+
+_UNPACKED: dict[str, str] = {}
+
+
+def pack_scene(folder) -> bytes:
+    """The scene folder as zip bytes."""
+    buf = io.BytesIO()
+    root = Path(folder)
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for p in sorted(root.rglob("*")):
+            if p.is_file():
+                z.write(p, p.relative_to(root).as_posix())
+    return buf.getvalue()
+
+
+def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_size: int, index: int):
+    """Runs on a Dask worker: unpack the scene once, keep one integrator per render, trace a batch."""
+    key = (digest, method, seed, batch_size)
+    if _WORKER.get("key") != key:
+        if digest not in _UNPACKED:
+            folder = Path(tempfile.mkdtemp(prefix="hud-dask-"))
+            with zipfile.ZipFile(io.BytesIO(blob)) as z:
+                z.extractall(folder)
+            _UNPACKED[digest] = str(folder)
+        _WORKER["integrator"] = INTEGRATORS[method](load_scene(_UNPACKED[digest]), seed, batch_size)
+        _WORKER["key"] = key
+    return _run_batch(index)
+
+
+def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
+                should_stop=None) -> RenderResult:
+    """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
+    blob = pack_scene(local.scene.root)
+    digest = hashlib.sha256(blob).hexdigest()
+    [blob_future] = client.scatter([blob], broadcast=True)
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    args = (blob_future, digest, local.name, local.seed, local.batch_size)
+
+    def submit(k):
+        return client.submit(_batch_on_worker, *args, k, pure=False,
+                             key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
+
+    result = drive(local, budget, submit, in_flight or 2 * workers, progress, should_stop, f"dask x{workers}")
+    result.extra["dask_workers"] = workers
+    return result
