@@ -95,10 +95,4 @@ class HudRenderEngine(bpy.types.RenderEngine):
         for name, (channels, chan_id, kind) in PASSES.items():
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
-
-def register():
-    bpy.utils.register_class(HudRenderEngine)
-
-
-def unregister():
-    bpy.utils.unregister_class(HudRenderEngine)
+register, unregister = bpy.utils.register_classes_factory((HudRenderEngine,))

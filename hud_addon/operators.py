@@ -97,12 +97,4 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
 
 CLASSES = (HUD_OT_add_preset, HUD_OT_export_scene, HUD_OT_show_light_paths)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -112,12 +112,4 @@ class HUD_PT_world(_HudPanel, bpy.types.Panel):
 
 CLASSES = (HUD_PT_render, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
