@@ -150,16 +150,17 @@ def test_meshes_load_from_ply_and_glb(preset, ext):
 
 @pytest.mark.parametrize("method", ["forward", "backward"])
 def test_two_processes_give_the_same_image_as_one(preset, method):
-    """Seed-addressed batches merged in order: identical films on one and on two processes."""
+    """Seed-addressed batches merged in order: the same film on one and on two processes (to the
+    last bits of rounding)."""
     from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import merge_equal, render_parallel
+    from tracer.parallel import films_match, render_parallel
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
     one = INTEGRATORS[method](load_scene(folder), 9).render(Budget(rays=2_500_000))
     two = render_parallel(INTEGRATORS[method](load_scene(folder), 9), Budget(rays=2_500_000), workers=2)
     assert one.batches == two.batches and one.rays == two.rays and one.found == two.found
-    assert merge_equal(one, two)
+    assert films_match(one, two)
 
 
 def test_dask_cluster_gives_the_same_image(preset):
@@ -167,7 +168,7 @@ def test_dask_cluster_gives_the_same_image(preset):
     distributed = pytest.importorskip("distributed")
     from tracer.distributed import render_dask
     from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import merge_equal
+    from tracer.parallel import films_match
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
@@ -175,4 +176,4 @@ def test_dask_cluster_gives_the_same_image(preset):
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
     with cluster, distributed.Client(cluster) as client:
         dask = render_dask(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=2_000_000), client)
-    assert dask.batches == one.batches and merge_equal(one, dask)
+    assert dask.batches == one.batches and films_match(one, dask)

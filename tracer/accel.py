@@ -14,7 +14,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import dot, max3
+from .vec import dot, max3, norm
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -61,7 +61,7 @@ class Accelerator:
             TriangleMesh(self._scene, local, np.ascontiguousarray(faces, dtype=np.int32))
             tri = vertices[faces]
             n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            length = np.linalg.norm(n, axis=1, keepdims=True)
+            length = norm(n)[:, None]
             ns.append(np.divide(n, length, out=np.zeros_like(n), where=length > 0))
             v0s.append(tri[:, 0])
             e1s.append(tri[:, 1] - tri[:, 0])

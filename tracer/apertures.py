@@ -12,7 +12,7 @@ import numpy as np
 
 from .accel import Accelerator
 from .sampling import disk_aperture_pdf, sample_disk_aperture, sample_triangles, triangle_areas
-from .vec import norm
+from .vec import dot, norm
 
 
 class DiskTarget:
@@ -46,13 +46,13 @@ class MeshTarget:
         v = points - origins
         dist = norm(v)
         d = v / np.maximum(dist, 1e-300)[:, None]
-        cos = np.abs(d @ self.normal)
+        cos = np.abs(dot(d, self.normal))
         ok = (cos > 1e-9) & (dist > 0)
         pdf = np.where(ok, dist**2 / (self.area * np.where(ok, cos, 1.0)), 0.0)
         return d, pdf
 
     def pdf(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         hits = self._accel.intersect(origins, dirs)
-        cos = np.abs(dirs @ self.normal)
+        cos = np.abs(dot(dirs, self.normal))
         ok = hits.hit & (cos > 1e-9)
         return np.where(ok, np.where(ok, hits.t, 0.0) ** 2 / (self.area * np.where(ok, cos, 1.0)), 0.0)

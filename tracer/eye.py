@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
-from .vec import normalize
+from .vec import dot, normalize
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -70,7 +70,7 @@ class ThinLensEye:
     # -- geometry ---------------------------------------------------------------------------
     def to_local(self, v: np.ndarray) -> np.ndarray:
         """World vectors (n, 3) to eye coordinates (n, 3)."""
-        return np.stack([v @ self.right, v @ self.up, v @ self.gaze], axis=-1)
+        return np.stack([dot(v, self.right), dot(v, self.up), dot(v, self.gaze)], axis=-1)
 
     def to_world(self, v: np.ndarray) -> np.ndarray:
         """Eye-coordinate vectors (n, 3) to world vectors (n, 3)."""
@@ -107,7 +107,11 @@ class ThinLensEye:
         else:
             f = (s / self.focal) ** 2 * np.pi * disk_view_factor(s * np.sqrt(tan2), s, self.pupil_radius)
         w = (weights[:, None] * weights[None, :]) * 0.25 * self.pixel_area
-        return (f * w[None, None]).sum(axis=(2, 3)).reshape(-1)
+        total = np.zeros(f.shape[:2])
+        for a in range(order):  # fixed summation order (see tracer.vec)
+            for b in range(order):
+                total = total + f[:, :, a, b] * w[a, b]
+        return total.reshape(-1)
 
     # -- backward: retina -> scene -------------------------------------------------------------
     def generate_rays(self, sx: np.ndarray, sy: np.ndarray, lens_xy: np.ndarray):
@@ -139,13 +143,13 @@ class ThinLensEye:
         Returns (t (n,) with inf where there is no hit, lens points (n, 2) in eye coordinates).
         """
         rel = origins - self.position
-        dz = dirs @ self.gaze
-        oz = rel @ self.gaze
+        dz = dot(dirs, self.gaze)
+        oz = dot(rel, self.gaze)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -oz / dz
         ok = (dz < 0) & (oz > 0) & (t > 0)
         hit = rel + np.where(ok, t, 0.0)[:, None] * dirs
-        lx, ly = hit @ self.right, hit @ self.up
+        lx, ly = dot(hit, self.right), dot(hit, self.up)
         ok &= lx * lx + ly * ly <= self.pupil_radius**2
         return np.where(ok, t, np.inf), np.stack([lx, ly], axis=1)
 

@@ -105,7 +105,7 @@ def cosine_hemisphere(u: np.ndarray) -> np.ndarray:
     2D_Sampling_with_Multidimensional_Transformations).
     """
     xy = uniform_disk_concentric(u)
-    z = np.sqrt(np.maximum(0.0, 1.0 - np.sum(xy * xy, axis=-1)))
+    z = np.sqrt(np.maximum(0.0, 1.0 - dot(xy, xy)))
     return np.concatenate([xy, z[:, None]], axis=-1)
 
 
@@ -309,7 +309,7 @@ def gaussian_lobe(
     angle = 2.0 * np.pi * u[:, 1]
     z = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=-1)
     beta = np.asarray(beta0, dtype=np.float64) + np.asarray(sigma, dtype=np.float64) * z
-    beta_sq = np.sum(beta * beta, axis=-1)
+    beta_sq = dot(beta, beta)
     valid = beta_sq < 1.0
     d = np.concatenate([beta, np.sqrt(np.maximum(0.0, 1.0 - beta_sq))[:, None]], axis=-1)
     d[~valid] = (0.0, 0.0, 1.0)
@@ -340,7 +340,7 @@ def gaussian_lobe_pdf(d: np.ndarray, beta0: np.ndarray, sigma: np.ndarray) -> np
     d = np.asarray(d, dtype=np.float64)
     sigma = np.asarray(sigma, dtype=np.float64)
     z = (d[:, :2] - np.asarray(beta0, dtype=np.float64)) / sigma
-    g2 = np.exp(-0.5 * np.sum(z * z, axis=-1)) / (2.0 * np.pi * np.prod(sigma, axis=-1))
+    g2 = np.exp(-0.5 * dot(z, z)) / (2.0 * np.pi * sigma[..., 0] * sigma[..., 1])
     return np.where(d[:, 2] > 0.0, g2 * d[:, 2], 0.0)
 
 
@@ -391,7 +391,7 @@ def sample_disk_aperture(
     v = np.asarray(center, dtype=np.float64) + xy[:, 0:1] * t + xy[:, 1:2] * b - origins
     dist = norm(v)
     d = np.divide(v, dist[:, None], out=np.zeros_like(v), where=dist[:, None] > 0.0)
-    cos = np.abs(d @ nn)
+    cos = np.abs(dot(d, nn))
     ok = cos > GRAZING_COS
     d[~ok] = nn
     pdf = np.divide(dist * dist, np.pi * radius * radius * cos, out=np.zeros_like(dist), where=ok)
@@ -430,11 +430,11 @@ def disk_aperture_pdf(
     center = np.asarray(center, dtype=np.float64)
     nn = np.asarray(normal, dtype=np.float64)
     nn = nn / np.linalg.norm(nn)
-    cos = d @ nn
+    cos = dot(d, nn)
     grazing = np.abs(cos) <= GRAZING_COS
-    dist = np.divide((center - origins) @ nn, cos, out=np.zeros_like(cos), where=~grazing)
+    dist = np.divide(dot(center - origins, nn), cos, out=np.zeros_like(cos), where=~grazing)
     offset = origins + dist[:, None] * d - center
-    hit = ~grazing & (dist > 0.0) & (np.sum(offset * offset, axis=-1) <= radius * radius)
+    hit = ~grazing & (dist > 0.0) & (dot(offset, offset) <= radius * radius)
     return np.divide(
         dist * dist, np.pi * radius * radius * np.abs(cos), out=np.zeros_like(cos), where=hit
     )
@@ -455,7 +455,7 @@ def triangle_areas(tris: np.ndarray) -> np.ndarray:
     """
     tris = np.asarray(tris, dtype=np.float64)
     cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    return 0.5 * np.linalg.norm(cross, axis=-1)
+    return 0.5 * norm(cross)
 
 
 def sample_triangles(
@@ -490,7 +490,7 @@ def sample_triangles(
     u = np.asarray(u, dtype=np.float64)
     tri_index, _ = sample_discrete(triangle_areas(tris), u[:, 0])
     b12 = uniform_triangle(u[:, 1:])
-    bary = np.concatenate([1.0 - np.sum(b12, axis=-1, keepdims=True), b12], axis=-1)
+    bary = np.concatenate([1.0 - b12[:, :1] - b12[:, 1:], b12], axis=-1)
     t = tris[tri_index]
     points = bary[:, :1] * t[:, 0] + bary[:, 1:2] * t[:, 1] + bary[:, 2:3] * t[:, 2]  # fixed summation order
     return points, tri_index, bary

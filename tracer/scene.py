@@ -56,6 +56,7 @@ from .imageio import read_image
 from .pupil import pupil_diameter_mm
 from .units import lambertian_luminance_cd_m2, normalize_color
 from .validate import FieldChecker
+from .vec import norm
 
 FORMAT = "hud-scene"
 VERSION = 1
@@ -492,7 +493,7 @@ def load_scene(path: str | Path) -> Scene:
         v, f, uv = _load_mesh(ck, root, rel, f"{fld}.mesh")
         if f.min() < 0 or f.max() >= len(v):
             ck.fail(f"{fld}.mesh", f"{rel}: face indices out of range")
-        vw = v @ m[:3, :3].T + m[:3, 3]
+        vw = v[:, :1] * m[:3, 0] + v[:, 1:2] * m[:3, 1] + v[:, 2:3] * m[:3, 2] + m[:3, 3]  # fixed order
         if np.linalg.det(m[:3, :3]) < 0:
             f = f[:, ::-1]  # a mirroring transform would turn the normals inside out
         smooth = ck.boolean(o.get("smooth_normals", False), f"{fld}.smooth_normals")
@@ -505,7 +506,7 @@ def load_scene(path: str | Path) -> Scene:
             vn = np.zeros_like(vw)
             for k in range(3):
                 np.add.at(vn, f[:, k], cross)
-            lengths = np.linalg.norm(vn, axis=1)
+            lengths = norm(vn)
             normals = np.divide(vn, lengths[:, None], out=np.zeros_like(vn), where=lengths[:, None] > 0)
         if mat.type == "lcd" and uv is None:
             ck.fail(f"{fld}.mesh", f"{rel}: an LCD needs texture coordinates (an OBJ with vt lines)")

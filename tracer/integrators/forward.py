@@ -22,7 +22,7 @@ import numpy as np
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
-from ..vec import dot, max3
+from ..vec import dot, max3, norm
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
@@ -39,7 +39,7 @@ class ForwardTracer(Integrator):
             if not isinstance(surf, Emitter):
                 continue
             t = self.objects[slot].triangles
-            area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+            area = 0.5 * norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
             sides = 2.0 if surf.two_sided else 1.0
             tris.append(t)
             slots.append(np.full(len(t), slot))
@@ -66,7 +66,7 @@ class ForwardTracer(Integrator):
         b = uniform_triangle(rng.random((n, 2)))
         points = t[:, 0] * (1 - b[:, :1] - b[:, 1:]) + t[:, 1] * b[:, :1] + t[:, 2] * b[:, 1:]
         cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        area = 0.5 * np.linalg.norm(cross, axis=1)
+        area = 0.5 * norm(cross)
         normal = cross / (2 * area)[:, None]
         slot = self.emitter_slot[tri]
         pdf_pos = pmf / area
