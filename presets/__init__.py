@@ -7,6 +7,3 @@ add-on builds its "Add HUD preset" menu from the same registry.
 from . import analytic_disk, analytic_furnace, analytic_mirror, hud_direct
 
 PRESETS = {m.NAME: m for m in (hud_direct, analytic_mirror, analytic_disk, analytic_furnace)}
-
-#: The preset `make demo` renders.
-DEFAULT = hud_direct.NAME

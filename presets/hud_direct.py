@@ -181,9 +181,3 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
         forward={"max_depth": 24},
         backward={"max_depth": 24},
     )
-
-
-def eyebox_note() -> str:
-    d = design()
-    return (f"windshield incidence {d['incidence_windshield_deg']:.1f} deg, LCD {d['lcd_size'][0]:.1f} x "
-            f"{d['lcd_size'][1]:.1f} mm at {d['s_o']:.1f} mm from the mirror, magnification {d['magnification']:.2f}")

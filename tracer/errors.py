@@ -41,6 +41,3 @@ class ImageReadError(TracerError):
         self.reason = reason
         super().__init__(f"{self.path}: {reason}")
 
-
-class RenderCancelled(TracerError):
-    """Raised inside a batch loop only when a caller asked to abort without keeping results."""

@@ -76,8 +76,6 @@ MATERIAL_FIELDS: dict[str, tuple[set[str], set[str]]] = {
     "aperture": (set(), set()),
 }
 
-#: Materials that scatter light diffusely (the paper's "scattering surfaces").
-SCATTERING = {"lambertian", "lambertian_transmitter", "diffuser"}
 
 
 @dataclass
@@ -184,10 +182,6 @@ class Scene:
     def traced_objects(self) -> list[SceneObject]:
         """Objects that take part in ray intersection (virtual apertures do not)."""
         return [o for o in self.objects if o.material.type != "aperture"]
-
-    @property
-    def emitters(self) -> list[SceneObject]:
-        return [o for o in self.objects if o.material.type == "emitter"]
 
 
 def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
