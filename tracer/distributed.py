@@ -19,7 +19,8 @@ import zipfile
 from pathlib import Path
 
 from .integrators import INTEGRATORS, Budget, RenderResult
-from .parallel import _WORKER, _run_batch, drive
+from .integrators.base import drive
+from .parallel import _WORKER, _run_batch
 from .scene import load_scene
 
 _UNPACKED: dict[str, str] = {}

@@ -60,7 +60,6 @@ class BackwardTracer(Integrator):
                 # A stop that covers the whole pupil leaves no second stratum: all samples go to it.
                 share = ep.share if rest > 1e-12 * self.eye.pupil_area else 1.0
                 self.strata = (ep.center_mm, ep.radius_mm, share, inside, max(rest, 0.0))
-        self.truncated = 0
 
     def lens_samples(self, rng: np.random.Generator, n: int):
         """Pupil points (n, 2) in eye coordinates (mm) and their area weights (n,) (mm^2): the pupil

@@ -157,6 +157,7 @@ class Integrator:
         self.accel = Accelerator([(o.vertices, o.faces) for o in self.objects]) if self.objects else None
         self.warnings: list[str] = []
         self.rays_without_geometry = 0  # rays of a scene with no geometry: they all escape
+        self.truncated = 0  # paths cut at max_depth (a bias the report warns of)
         self._targets: dict[str, DiskTarget | MeshTarget] = {}
 
     # -- helpers shared by the methods ---------------------------------------------------------
@@ -199,40 +200,20 @@ class Integrator:
         """Trace one batch into ``film``; return (paths, paths that found light)."""
         raise NotImplementedError
 
+    def trace_batch(self, index: int) -> tuple:
+        """Trace batch ``index`` into a film of its own: (index, sum_rgb, sum_y2, samples, paths,
+        found, rays, truncated), what :func:`drive` merges, in this process or in a worker."""
+        film = Film(self.eye.width, self.eye.height)
+        rays_before, truncated_before = self.rays_traced, self.truncated
+        paths, found = self.run_batch(make_rng(self.seed, index), film)
+        return (index, film.sum_rgb, film.sum_y2, film.samples, paths, found, self.rays_traced - rays_before,
+                self.truncated - truncated_before)
+
     def render(self, budget: Budget, progress: Progress | None = None,
                should_stop: ShouldStop | None = None) -> RenderResult:
-        film = Film(self.eye.width, self.eye.height)
-        paths = found = batches = 0
-        partial = False
-        start = time.perf_counter()
-        while True:
-            elapsed = time.perf_counter() - start
-            if budget.fraction(self.rays_traced, elapsed) >= 1.0:
-                break
-            if should_stop is not None and should_stop():
-                partial = True
-                break
-            rays_before = self.rays_traced
-            # Each batch fills its own film, merged in batch order: the same additions, in the same
-            # order, as a multi-process render (tracer.parallel), so both give identical images.
-            batch_film = Film(film.width, film.height)
-            p, f = self.run_batch(make_rng(self.seed, batches), batch_film)
-            film.merge(batch_film)
-            paths += p
-            found += f
-            batches += 1
-            if self.rays_traced == rays_before:
-                break  # nothing to trace (no source, no geometry): more batches cannot help
-            if progress is not None:
-                elapsed = time.perf_counter() - start
-                eff = found / paths if paths else 0.0
-                progress(budget.fraction(self.rays_traced, elapsed),
-                         f"{self.name}: {self.rays_traced:,} rays, efficiency {eff:.2e}, {elapsed:.1f} s")
-        seconds = time.perf_counter() - start
-        result = RenderResult(self.name, self.seed, film, self.rays_traced, paths, found, seconds, partial,
-                              batches, list(self.warnings))
-        self.finish(result)
-        return result
+        """Render in this process: the batches run one at a time through the same driver, and the
+        same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
+        return drive(self, budget, lambda k: _Done(self.trace_batch(k)), 1, progress, should_stop)
 
     def finish(self, result: RenderResult):
         """Add method-specific warnings and figures to a finished result."""
@@ -246,3 +227,68 @@ class Integrator:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
+
+
+class _Done:
+    """A batch traced in this process, with the interface of a pending task."""
+
+    def __init__(self, value):
+        self._value = value
+
+    def done(self) -> bool:
+        return True
+
+    def result(self):
+        return self._value
+
+
+def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: Progress | None = None,
+          should_stop: ShouldStop | None = None, label: str = "") -> RenderResult:
+    """Hand out batch indices in increasing order through ``submit(k)`` (which returns an object with
+    ``done()`` and ``result()``, the tuple of :meth:`Integrator.trace_batch`), keep at most
+    ``in_flight`` running, and merge the contiguous prefix of finished batches in batch order until
+    the budget is met. Each batch fills its own film and films are added in batch order, so one
+    process, several, or a cluster give the same image for a budget in rays."""
+    method = f"{local.name} {label}" if label else local.name
+    done: dict[int, tuple] = {}
+    pending: dict[int, object] = {}
+    film = Film(local.eye.width, local.eye.height)
+    rays = paths = found = truncated = merged = next_index = 0
+    partial = False
+    start = time.perf_counter()
+    while True:
+        budget_met = budget.fraction(rays, time.perf_counter() - start) >= 1.0
+        if should_stop is not None and not budget_met and should_stop():
+            partial = True
+            break
+        if not budget_met:
+            while len(pending) < in_flight:
+                pending[next_index] = submit(next_index)
+                next_index += 1
+        elif not pending:
+            break
+        finished = [k for k, f in pending.items() if f.done()]
+        if not finished:
+            time.sleep(0.002)
+            continue
+        for k in finished:
+            done[k] = pending.pop(k).result()
+        while merged in done and budget.fraction(rays, time.perf_counter() - start) < 1.0:
+            _, s_rgb, s_y2, samples, p, f, r, t = done.pop(merged)
+            film.sum_rgb += s_rgb
+            film.sum_y2 += s_y2
+            film.samples += samples
+            paths, found, rays, truncated = paths + p, found + f, rays + r, truncated + t
+            merged += 1
+            if progress is not None:
+                elapsed = time.perf_counter() - start
+                eff = found / paths if paths else 0.0
+                progress(budget.fraction(rays, elapsed),
+                         f"{method}: {rays:,} rays, efficiency {eff:.2e}, {elapsed:.1f} s")
+        if rays == 0 and merged > 0:
+            break  # nothing to trace (no source, no geometry): more batches cannot help
+    result = RenderResult(local.name, local.seed, film, rays, paths, found, time.perf_counter() - start, partial,
+                          merged, list(local.warnings))
+    local.truncated = truncated
+    local.finish(result)
+    return result

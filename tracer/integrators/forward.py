@@ -53,7 +53,6 @@ class ForwardTracer(Integrator):
         if not self.scene.environment.is_black:
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
                                  "method (the hybrid method of a later release merges both)")
-        self.truncated = 0
         #: When a list, run_batch appends (particle ids (k,), points (k, 3) mm, reached_eye (k,) bool)
         #: for every event, so that tools can draw the sampled light paths.
         self.recorder: list | None = None
