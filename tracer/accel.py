@@ -25,19 +25,33 @@ class Hits:
     """Closest hits of a ray batch; arrays of length n, world mm, float64.
 
     ``obj`` is the slot of the object in the accelerator's list (-1 for a miss), ``face`` the
-    triangle index inside that object, ``bary`` (n, 2) the barycentric (u, v) of Embree.
+    triangle index inside that object, ``t`` the distance (inf for a miss), ``points`` the hit points
+    (the ray origin for a miss), ``normals`` the unit geometric normals (0 for a miss). Barycentric
+    coordinates are computed on demand (:meth:`bary`): most surfaces need none.
     """
 
     obj: np.ndarray
     face: np.ndarray
     t: np.ndarray
-    bary: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    gface: np.ndarray
+    accel: Accelerator
 
     @property
     def hit(self) -> np.ndarray:
         return self.obj >= 0
+
+    def by_object(self, mask: np.ndarray | None = None) -> list[tuple[int, np.ndarray]]:
+        """(slot, ray indices in increasing order) for every object hit (by the rays where ``mask``),
+        slots in increasing order; a bincount, not a sort, so it costs a pass per object."""
+        obj = self.obj if mask is None else np.where(mask, self.obj, -1)
+        counts = np.bincount(obj + 1)
+        return [(int(s) - 1, np.flatnonzero(obj == s - 1)) for s in np.flatnonzero(counts[1:]) + 1]
+
+    def bary(self, idx: np.ndarray) -> np.ndarray:
+        """(u, v) of the hits ``idx`` on their triangles, (k, 2)."""
+        return self.accel.barycentrics(self.gface[idx], self.points[idx])
 
 
 class Accelerator:
@@ -78,35 +92,41 @@ class Accelerator:
         n = len(origins)
         self.rays_traced += n
         if n == 0:
-            z = np.zeros(0)
-            return Hits(np.zeros(0, np.int64), np.zeros(0, np.int64), z, np.zeros((0, 2)), np.zeros((0, 3)),
-                        np.zeros((0, 3)))
-        o32 = np.ascontiguousarray(origins - self.center, dtype=np.float32)
-        d32 = np.ascontiguousarray(dirs, dtype=np.float32)
+            z = np.zeros(0, np.int64)
+            return Hits(z, z, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), z, self)
+        o32 = (origins - self.center).astype(np.float32)
+        d32 = dirs.astype(np.float32)
         if tmax is None:
             res = self._scene.run(o32, d32, output=True)
         else:
             res = self._scene.run(o32, d32, dists=np.ascontiguousarray(tmax, dtype=np.float32), output=True)
-        obj = res["geomID"].astype(np.int64)
-        hit = obj >= 0
-        face = np.where(hit, res["primID"], 0).astype(np.int64)
-        gface = np.where(hit, self._offsets[np.maximum(obj, 0)] + face, 0)
-        ng = self._n[gface]
-        t = res["tfar"].astype(np.float64)
-        # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
-        denom = dot(dirs, ng)
-        num = dot(self._v0[gface] - origins, ng)
-        ok = hit & (np.abs(denom) > 1e-9)
-        t = np.where(ok, num / np.where(ok, denom, 1.0), t)
-        t = np.where(hit, t, np.inf)
-        points = origins + np.where(hit, t, 0.0)[:, None] * dirs
-        bary = self._barycentrics(gface, points)
-        return Hits(np.where(hit, obj, -1), face, t, bary, points, ng)
+        geom = res["geomID"]
+        idx = np.flatnonzero(geom >= 0)
+        obj = np.full(n, -1, np.int64)
+        face = np.zeros(n, np.int64)
+        gface = np.zeros(n, np.int64)
+        t = np.full(n, np.inf)
+        points = origins.copy()
+        normals = np.zeros((n, 3))
+        if len(idx):
+            o_h, d_h = origins[idx], dirs[idx]
+            obj_h = geom[idx].astype(np.int64)
+            face_h = res["primID"][idx].astype(np.int64)
+            g = self._offsets[obj_h] + face_h
+            ng = self._n[g]
+            # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
+            denom = dot(d_h, ng)
+            ok = np.abs(denom) > 1e-9
+            t_h = np.where(ok, dot(self._v0[g] - o_h, ng) / np.where(ok, denom, 1.0),
+                           res["tfar"][idx].astype(np.float64))
+            obj[idx], face[idx], gface[idx], t[idx], normals[idx] = obj_h, face_h, g, t_h, ng
+            points[idx] = o_h + t_h[:, None] * d_h
+        return Hits(obj, face, t, points, normals, gface, self)
 
-    def _barycentrics(self, gface: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """(u, v) of hit points on their triangles, (n, 2), in float64 from the geometry itself: finer
-        than Embree's float32 values and independent of how Embree built its BVH, so a batch gives
-        the same numbers in every process."""
+    def barycentrics(self, gface: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(u, v) of points on their triangles (global face indices ``gface``), (n, 2), in float64
+        from the geometry itself: finer than Embree's float32 values and independent of how Embree
+        built its BVH, so a batch gives the same numbers in every process."""
         e1, e2 = self._e1[gface], self._e2[gface]
         w = points - self._v0[gface]
         d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)

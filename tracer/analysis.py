@@ -146,8 +146,7 @@ def specular_paths(integrator, stride: int | None = None, max_depth: int = 12, d
             s_miss = np.array([code(s, "environment") for s in sig[miss]])
             leaf(s_miss, factor[miss] * env.radiance(dirs[miss]), factor[miss], owner[miss], lcd[miss])
         nxt = {k: [] for k in ("o", "d", "f", "own", "lcd", "sig")}
-        for slot in np.unique(hits.obj[hits.hit]):
-            sel = np.nonzero(hits.obj == slot)[0]
+        for slot, sel in hits.by_object():
             surf = integrator.surfaces[slot]
             it = integrator.interaction(slot, hits, sel, dirs)
             name = integrator.objects[slot].name

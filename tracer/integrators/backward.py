@@ -112,8 +112,7 @@ class BackwardTracer(Integrator):
                 radiance[idx[miss]] += thr[miss] * le
                 found[idx[miss]] |= luminance(le) > 0
             next_o, next_d, next_t, next_i = [], [], [], []
-            for slot in np.unique(hits.obj[hits.hit]):
-                sel = np.nonzero(hits.obj == slot)[0]
+            for slot, sel in hits.by_object():
                 surf = self.surfaces[slot]
                 it = self.interaction(slot, hits, sel, dirs)
                 if surf.emits:

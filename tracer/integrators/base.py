@@ -172,22 +172,24 @@ class Integrator:
 
     def interaction(self, slot: int, hits, idx: np.ndarray, dirs: np.ndarray) -> Interaction:
         """Surface data for rays ``idx`` that hit object ``slot``: shading normals and UVs are
-        interpolated from the vertices with Embree's barycentrics."""
+        interpolated from the vertices with the hits' barycentrics (computed only for objects that
+        have vertex normals or texture coordinates)."""
         obj = self.objects[slot]
-        face = obj.faces[hits.face[idx]]
-        u, v = hits.bary[idx, 0], hits.bary[idx, 1]
-        w0 = 1.0 - u - v
         ng = hits.normals[idx]
-        ns = ng
-        if obj.normals is not None:
-            nv = obj.normals
-            ns = w0[:, None] * nv[face[:, 0]] + u[:, None] * nv[face[:, 1]] + v[:, None] * nv[face[:, 2]]
-            ns /= np.maximum(norm(ns), 1e-300)[:, None]
-            ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
-        uv = None
-        if obj.uv is not None:
-            t = obj.uv
-            uv = w0[:, None] * t[face[:, 0]] + u[:, None] * t[face[:, 1]] + v[:, None] * t[face[:, 2]]
+        ns, uv = ng, None
+        if obj.normals is not None or obj.uv is not None:
+            face = obj.faces[hits.face[idx]]
+            bary = hits.bary(idx)
+            u, v = bary[:, 0], bary[:, 1]
+            w0 = 1.0 - u - v
+            if obj.normals is not None:
+                nv = obj.normals
+                ns = w0[:, None] * nv[face[:, 0]] + u[:, None] * nv[face[:, 1]] + v[:, None] * nv[face[:, 2]]
+                ns /= np.maximum(norm(ns), 1e-300)[:, None]
+                ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
+            if obj.uv is not None:
+                t = obj.uv
+                uv = w0[:, None] * t[face[:, 0]] + u[:, None] * t[face[:, 1]] + v[:, None] * t[face[:, 2]]
         return Interaction(dirs[idx], hits.points[idx], ng, ns, uv)
 
     @property

@@ -161,8 +161,7 @@ class ForwardTracer(Integrator):
                 film.add(pix[ok], flux[at_eye][ok] / eye.extent[pix[ok]][:, None])
             hit = hits.hit & ~at_eye
             next_o, next_d, next_f, next_0, next_id = [], [], [], [], []
-            for slot in np.unique(hits.obj[hit]):
-                sel = np.nonzero(hit & (hits.obj == slot))[0]
+            for slot, sel in hits.by_object(hit):
                 surf = self.surfaces[slot]
                 if surf.terminal:
                     continue
