@@ -14,7 +14,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import dot, max3, norm
+from .vec import axpy, dot, max3, norm, rows, scale
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -109,26 +109,26 @@ class Accelerator:
         points = origins.copy()
         normals = np.zeros((n, 3))
         if len(idx):
-            o_h, d_h = origins[idx], dirs[idx]
+            o_h, d_h = rows(origins, idx), rows(dirs, idx)
             obj_h = geom[idx].astype(np.int64)
             face_h = res["primID"][idx].astype(np.int64)
             g = self._offsets[obj_h] + face_h
-            ng = self._n[g]
+            ng = rows(self._n, g)
             # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
             denom = dot(d_h, ng)
             ok = np.abs(denom) > 1e-9
-            t_h = np.where(ok, dot(self._v0[g] - o_h, ng) / np.where(ok, denom, 1.0),
+            t_h = np.where(ok, dot(rows(self._v0, g) - o_h, ng) / np.where(ok, denom, 1.0),
                            res["tfar"][idx].astype(np.float64))
             obj[idx], face[idx], gface[idx], t[idx], normals[idx] = obj_h, face_h, g, t_h, ng
-            points[idx] = o_h + t_h[:, None] * d_h
+            points[idx] = axpy(t_h, d_h, o_h)
         return Hits(obj, face, t, points, normals, gface, self)
 
     def barycentrics(self, gface: np.ndarray, points: np.ndarray) -> np.ndarray:
         """(u, v) of points on their triangles (global face indices ``gface``), (n, 2), in float64
         from the geometry itself: finer than Embree's float32 values and independent of how Embree
         built its BVH, so a batch gives the same numbers in every process."""
-        e1, e2 = self._e1[gface], self._e2[gface]
-        w = points - self._v0[gface]
+        e1, e2 = rows(self._e1, gface), rows(self._e2, gface)
+        w = points - rows(self._v0, gface)
         d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
         w1, w2 = dot(w, e1), dot(w, e2)
         det = d11 * d22 - d12 * d12
@@ -139,6 +139,6 @@ class Accelerator:
         """Origins for rays leaving surface ``points`` along ``dirs``: offset along the geometric
         normal to the side the ray goes, by a distance that scales with the coordinates' magnitude
         (float32 Embree resolves about 6e-8 of it)."""
-        scale = OFFSET_SCALE * (1.0 + max3(np.abs(points - self.center)))
+        offset = OFFSET_SCALE * (1.0 + max3(np.abs(points - self.center)))
         side = np.where(dot(dirs, normals) >= 0, 1.0, -1.0)
-        return points + (side * scale)[:, None] * normals
+        return axpy(side * offset, normals, points)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..sampling import uniform_disk_concentric
 from ..units import luminance
-from ..vec import dot, max3
+from ..vec import dot, max3, rows
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
@@ -122,7 +122,7 @@ class BackwardTracer(Integrator):
                 if surf.terminal:
                     continue
                 d_out, factor, alive = surf.scatter(it, rng, radiance=True)
-                t_new = thr[sel] * factor
+                t_new = rows(thr, sel) * factor
                 alive &= max3(t_new) > 0
                 if depth >= ROULETTE_DEPTH:
                     q = np.clip(max3(t_new) / ROULETTE_WEIGHT, 0.0, 1.0)
@@ -130,9 +130,10 @@ class BackwardTracer(Integrator):
                     alive &= survive
                     t_new = t_new / np.where(alive, q, 1.0)[:, None]
                 keep = np.nonzero(alive)[0]
-                next_o.append(accel.spawn(it.p[keep], it.ng[keep], d_out[keep]))
-                next_d.append(d_out[keep])
-                next_t.append(t_new[keep])
+                d_keep = rows(d_out, keep)
+                next_o.append(accel.spawn(rows(it.p, keep), rows(it.ng, keep), d_keep))
+                next_d.append(d_keep)
+                next_t.append(rows(t_new, keep))
                 next_i.append(idx[sel[keep]])
             if not next_i:
                 idx = np.zeros(0, np.int64)

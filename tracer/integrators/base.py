@@ -23,7 +23,7 @@ from ..optics.surfaces import Interaction, Surface, make_surface
 from ..sampling import make_rng
 from ..scene import Scene
 from ..units import luminance
-from ..vec import dot, norm
+from ..vec import dot, norm, rows
 
 #: Rays per batch (structure of arrays, one Embree call per bounce).
 DEFAULT_BATCH = 1 << 17
@@ -175,7 +175,7 @@ class Integrator:
         interpolated from the vertices with the hits' barycentrics (computed only for objects that
         have vertex normals or texture coordinates)."""
         obj = self.objects[slot]
-        ng = hits.normals[idx]
+        ng = rows(hits.normals, idx)
         ns, uv = ng, None
         if obj.normals is not None or obj.uv is not None:
             face = obj.faces[hits.face[idx]]
@@ -190,7 +190,7 @@ class Integrator:
             if obj.uv is not None:
                 t = obj.uv
                 uv = w0[:, None] * t[face[:, 0]] + u[:, None] * t[face[:, 1]] + v[:, None] * t[face[:, 2]]
-        return Interaction(dirs[idx], hits.points[idx], ng, ns, uv)
+        return Interaction(rows(dirs, idx), rows(hits.points, idx), ng, ns, uv)
 
     @property
     def rays_traced(self) -> int:

@@ -22,7 +22,7 @@ import numpy as np
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
-from ..vec import dot, max3, norm
+from ..vec import dot, max3, norm, rows
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
@@ -45,6 +45,10 @@ class ForwardTracer(Integrator):
             slots.append(np.full(len(t), slot))
             power.append(np.pi * surf.luminance * area * sides)  # cd/m^2 mm^2 sr = 1e-6 lm
         self.emitter_tris = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+        t = self.emitter_tris
+        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        self.emitter_area = 0.5 * norm(cross)  # mm^2
+        self.emitter_normal = cross / np.where(self.emitter_area > 0, 2 * self.emitter_area, 1.0)[:, None]
         self.emitter_slot = np.concatenate(slots) if slots else np.zeros(0, np.int64)
         self.emitter_power = np.concatenate(power) if power else np.zeros(0)
         self.total_flux_lm = float(self.emitter_power.sum() * MM2_TO_M2)
@@ -64,9 +68,8 @@ class ForwardTracer(Integrator):
         t = self.emitter_tris[tri]
         b = uniform_triangle(rng.random((n, 2)))
         points = t[:, 0] * (1 - b[:, :1] - b[:, 1:]) + t[:, 1] * b[:, :1] + t[:, 2] * b[:, 1:]
-        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        area = 0.5 * norm(cross)
-        normal = cross / (2 * area)[:, None]
+        area = self.emitter_area[tri]
+        normal = np.take(self.emitter_normal, tri, axis=0)
         slot = self.emitter_slot[tri]
         pdf_pos = pmf / area
         radiance = np.zeros((n, 3))
@@ -140,7 +143,7 @@ class ForwardTracer(Integrator):
         eye = self.eye
         origins, dirs, flux, alive = self.emit(rng, n)
         pid = np.nonzero(alive)[0]
-        origins, dirs, flux = origins[pid], dirs[pid], flux[pid]
+        origins, dirs, flux = rows(origins, pid), rows(dirs, pid), rows(flux, pid)
         flux0 = max3(flux)
         found = 0
         self._record(pid, origins, np.zeros(len(pid), bool))
@@ -170,16 +173,17 @@ class ForwardTracer(Integrator):
                     d_out, factor, ok = self._scatter_aimed(surf, it, rng)
                 else:
                     d_out, factor, ok = surf.scatter(it, rng, radiance=False)
-                f_new = flux[sel] * factor
+                f_new = rows(flux, sel) * factor
                 ok &= max3(f_new) > 0
                 if depth >= ROULETTE_DEPTH:
                     q = np.clip(max3(f_new) / flux0[sel] / ROULETTE_WEIGHT, 0.0, 1.0)
                     ok &= rng.random(len(sel)) < q
                     f_new = f_new / np.where(ok, q, 1.0)[:, None]
                 k = np.nonzero(ok)[0]
-                next_o.append(self.accel.spawn(it.p[k], it.ng[k], d_out[k]))
-                next_d.append(d_out[k])
-                next_f.append(f_new[k])
+                d_keep = rows(d_out, k)
+                next_o.append(self.accel.spawn(rows(it.p, k), rows(it.ng, k), d_keep))
+                next_d.append(d_keep)
+                next_f.append(rows(f_new, k))
                 next_0.append(flux0[sel[k]])
                 next_id.append(pid[sel[k]])
             if not next_o:

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..vec import dot, normalize
+from ..vec import axpy, dot, normalize
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Mirror direction of ``d`` (n, 3) about normals ``n`` (n, 3); either side of the normal."""
-    return d - 2.0 * dot(d, n)[:, None] * n
+    return axpy(-2.0 * dot(d, n), n, d)
 
 
 def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
@@ -44,5 +44,8 @@ def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray | float, cos_i: np.nda
     """Refracted direction (Snell) of unit ``d`` through a surface whose unit normal ``n`` faces the
     incident side (d . n = -cos_i); eta = n_t / n_i."""
     eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
-    t = d / eta[:, None] + (cos_i / eta - cos_t)[:, None] * n
+    k = cos_i / eta - cos_t
+    t = np.empty(d.shape)
+    for i in range(3):  # column by column (see tracer.vec)
+        t[:, i] = d[:, i] / eta + k * n[:, i]
     return normalize(t)

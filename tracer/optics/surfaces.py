@@ -26,6 +26,7 @@ from ..sampling import (
 )
 from ..scene import SceneObject, emitter_luminance
 from ..units import luminance
+from ..vec import scale
 from .fresnel import dot, fresnel_unpolarized, reflect, refract
 
 
@@ -43,6 +44,9 @@ class Interaction:
     ng: np.ndarray
     ns: np.ndarray
     uv: np.ndarray | None
+    #: A surface's local frames at these hits, kept so that scatter, pdf and eval_fcos on the same
+    #: interaction build them once.
+    frame: tuple | None = None
 
     def __len__(self) -> int:
         return len(self.d)
@@ -129,7 +133,7 @@ class Dielectric(Surface):
 
     def _geometry(self, it: Interaction):
         side = _side(it)
-        n_face = it.ns * side[:, None]  # normal on the incident side
+        n_face = scale(it.ns, side)  # normal on the incident side
         n_i = np.where(side > 0, self.n_out, self.n_in)
         n_t = np.where(side > 0, self.n_in, self.n_out)
         cos_i = np.clip(-dot(it.d, n_face), 0.0, 1.0)
@@ -285,8 +289,9 @@ class GaussianDiffuser(Surface):
         self.axis = obj.local_x
 
     def _frame(self, it: Interaction):
-        exit_normal = it.ng * (-_side(it))[:, None]
-        return frame_from_normal(exit_normal, self.axis)
+        if it.frame is None:
+            it.frame = frame_from_normal(scale(it.ng, -_side(it)), self.axis)
+        return it.frame
 
     def scatter(self, it, rng, radiance):
         t, b, n = self._frame(it)
