@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
-from .vec import dot, normalize
+from .vec import axpy, dot, minus, normalize, scale
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -74,7 +74,7 @@ class ThinLensEye:
 
     def to_world(self, v: np.ndarray) -> np.ndarray:
         """Eye-coordinate vectors (n, 3) to world vectors (n, 3)."""
-        return v[:, :1] * self.right + v[:, 1:2] * self.up + v[:, 2:3] * self.gaze
+        return axpy(v[:, 2], self.gaze, axpy(v[:, 1], self.up, scale(self.right, v[:, 0])))
 
     def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
         """Perceived retina coordinates (sx (W,), sy (H,)) of pixel centres, mm."""
@@ -133,7 +133,7 @@ class ThinLensEye:
             q = np.stack([sx * s / f - lens_xy[:, 0], sy * s / f - lens_xy[:, 1], np.full_like(sx, s)], axis=1)
             d_local = q
         d_local = normalize(d_local)
-        origins = self.position + lens_xy[:, :1] * self.right + lens_xy[:, 1:2] * self.up
+        origins = axpy(lens_xy[:, 1], self.up, axpy(lens_xy[:, 0], self.right, self.position))
         return origins, self.to_world(d_local), d_local[:, 2] ** 4 / (f * f)
 
     # -- forward: scene -> retina ---------------------------------------------------------------
@@ -142,13 +142,13 @@ class ThinLensEye:
 
         Returns (t (n,) with inf where there is no hit, lens points (n, 2) in eye coordinates).
         """
-        rel = origins - self.position
+        rel = minus(origins, self.position)
         dz = dot(dirs, self.gaze)
         oz = dot(rel, self.gaze)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -oz / dz
         ok = (dz < 0) & (oz > 0) & (t > 0)
-        hit = rel + np.where(ok, t, 0.0)[:, None] * dirs
+        hit = axpy(np.where(ok, t, 0.0), dirs, rel)
         lx, ly = dot(hit, self.right), dot(hit, self.up)
         ok &= lx * lx + ly * ly <= self.pupil_radius**2
         return np.where(ok, t, np.inf), np.stack([lx, ly], axis=1)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .vec import dot, norm
+from .vec import axpy, dot, norm, scale
 
 #: |cos| between a sampled direction and an aperture's normal below which the direction is
 #: treated as grazing the aperture plane: its solid-angle density would be unbounded, so both
@@ -246,7 +246,7 @@ def to_world(v_local: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -
         The vectors in world coordinates.
     """
     v = np.asarray(v_local, dtype=np.float64)
-    return v[:, 0:1] * t + v[:, 1:2] * b + v[:, 2:3] * n
+    return axpy(v[:, 2], n, axpy(v[:, 1], b, scale(t, v[:, 0])))  # x t + y b + z n, in this order
 
 
 def to_local(v_world: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:

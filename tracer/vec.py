@@ -61,6 +61,14 @@ def axpy(s: np.ndarray, v: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
+def minus(a: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``a - c`` for rows a (n, k) and one vector c (k,), column by column."""
+    out = np.empty(a.shape, dtype=np.result_type(a, c))
+    for i in range(a.shape[1]):
+        np.subtract(a[:, i], c[i], out=out[:, i])
+    return out
+
+
 def rows(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """``a[idx]`` for an index array, through ``np.take`` (its fast path for rows of a 2-D array)."""
     return np.take(a, idx, axis=0)
