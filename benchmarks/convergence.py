@@ -12,7 +12,8 @@ reference's 99th percentile: the symbols of hud-direct, the lit panel of analyti
 reference's own noise subtracted from the mean squared error, and the time efficiency
 1 / (relative MSE x seconds). Output: benchmarks/results/<preset>.csv, docs/convergence-<preset>.png
 (log-log, one line per method, slope -1/2 drawn through each method's first point) and
-benchmarks/results/summary.md.
+benchmarks/results/summary.md. benchmarks/mitsuba_peer.py adds Mitsuba 3's lines to the same CSVs,
+charts and summary with the functions below (one metric implementation: :func:`errors`).
 """
 
 from __future__ import annotations
@@ -59,10 +60,40 @@ def reference(name: str, folder: Path, seconds: float, workers: int) -> dict:
     return ref
 
 
+def scene_folder(name: str) -> Path:
+    """The preset's scene folder in benchmarks/cache/scenes/, written on first use."""
+    folder = CACHE / "scenes" / name
+    return folder if folder.exists() else PRESETS[name].write(folder)
+
+
+def reference_seconds(name: str, ref_seconds: float) -> float:
+    """The reference's budget: ``ref_seconds`` for hud-direct, a third of it for the analytic scenes."""
+    return ref_seconds if name in REFERENCE_METHOD else ref_seconds / 3
+
+
+def bright_region(y_ref: np.ndarray) -> np.ndarray:
+    """Pixels above 10 % of the reference's 99th percentile (bool, the image's shape)."""
+    return y_ref > 0.1 * np.percentile(y_ref, 99)
+
+
+def errors(y: np.ndarray, ref: dict, wall: float) -> dict:
+    """Relative RMSE of a luminance image ``y`` (cd/m^2) against the reference over the whole image and
+    over the bright region, the reference's own variance subtracted from the mean squared error, and
+    the time efficiency 1 / (relative MSE x ``wall`` seconds)."""
+    y_ref, var_ref = ref["y"], ref["var"]
+    region = bright_region(y_ref)
+    row = {}
+    for label, mask in (("image", np.ones_like(region)), ("region", region)):
+        mean = float(y_ref[mask].mean())
+        mse = max(float(np.mean((y[mask] - y_ref[mask]) ** 2) - np.mean(var_ref[mask])), 0.0)
+        rel_mse = mse / mean**2
+        row[f"rel_rmse_{label}"] = math.sqrt(rel_mse)
+        row[f"time_efficiency_{label}"] = 1.0 / (rel_mse * wall) if rel_mse > 0 else math.inf
+    return row
+
+
 def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[dict]:
     scene = load_scene(folder)
-    y_ref, var_ref = ref["y"], ref["var"]
-    region = y_ref > 0.1 * np.percentile(y_ref, 99)
     rows = []
     for method in INTEGRATORS:
         for k, seconds in enumerate(budgets):
@@ -71,13 +102,7 @@ def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[di
             wall = time.perf_counter() - start
             y = luminance(res.film.rgb())
             row = {"preset": name, "method": method, "budget_s": seconds, "seconds": wall, "rays": res.rays,
-                   "paths": res.paths, "method_efficiency": res.efficiency}
-            for label, mask in (("image", np.ones_like(region)), ("region", region)):
-                mean = float(y_ref[mask].mean())
-                mse = max(float(np.mean((y[mask] - y_ref[mask]) ** 2) - np.mean(var_ref[mask])), 0.0)
-                rel_mse = mse / mean**2
-                row[f"rel_rmse_{label}"] = math.sqrt(rel_mse)
-                row[f"time_efficiency_{label}"] = 1.0 / (rel_mse * wall) if rel_mse > 0 else math.inf
+                   "paths": res.paths, "method_efficiency": res.efficiency} | errors(y, ref, wall)
             rows.append(row)
             print(f"{name:17s} {method:9s} {seconds:5.1f} s  rays {res.rays:>11,}  rel RMSE image "
                   f"{row['rel_rmse_image']:.3g}  region {row['rel_rmse_region']:.3g}", flush=True)

@@ -132,3 +132,28 @@ def test_error_falls_as_one_over_root_n(preset, method):
         errs.append(math.sqrt(mse) / 100.0)
     slope = np.polyfit(np.log(budgets), np.log(errs), 1)[0]
     assert -0.6 <= slope <= -0.4, (slope, errs)
+
+
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_two_seeds_differ_as_the_reported_variance_says(preset, method):
+    """Two seeds of analytic-mirror, compared over 16 x 16 blocks of the image (60 of them lit): z = (Y1 - Y2) /
+    sqrt(V1 + V2) per block, with V the block mean's variance from the film's own per-pixel
+    variance. If that variance is right, sum z^2 follows chi^2 with one degree of freedom per block:
+    a too small variance (overconfident report) fails on the high side, a too large one on the low
+    side. Two-sided, alpha = 0.01, Sidak over the two methods."""
+    from chi2 import gamma_q
+
+    folder = preset("analytic-mirror")
+    (y1, v1, _), (y2, v2, _) = (render(folder, method, 1_000_000, seed=s) for s in (11, 12))
+    z2 = []
+    for rows_ in np.array_split(np.arange(y1.shape[0]), 16):
+        for cols in np.array_split(np.arange(y1.shape[1]), 16):
+            block = np.ix_(rows_, cols)
+            m = y1[block].size
+            var = (v1[block].sum() + v2[block].sum()) / m**2
+            if var > 0:
+                z2.append((y1[block].mean() - y2[block].mean()) ** 2 / var)
+    assert len(z2) >= 30, "the panel must light enough blocks for the test to have power"
+    a = 1 - (1 - 0.01) ** (1 / 2)
+    p_upper = gamma_q(len(z2) / 2, sum(z2) / 2)
+    assert a / 2 < p_upper < 1 - a / 2, (sum(z2), len(z2), p_upper)

@@ -256,6 +256,7 @@ def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: P
     pending: dict[int, object] = {}
     film = Film(local.eye.width, local.eye.height)
     rays = paths = found = truncated = merged = next_index = 0
+    first = (0.0, 0)  # (seconds, rays) when the first batch was merged: start-up and warm-up end there
     partial = False
     start = time.perf_counter()
     while True:
@@ -282,6 +283,8 @@ def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: P
             film.samples += samples
             paths, found, rays, truncated = paths + p, found + f, rays + r, truncated + t
             merged += 1
+            if merged == 1:
+                first = (time.perf_counter() - start, rays)
             if progress is not None:
                 elapsed = time.perf_counter() - start
                 eff = found / paths if paths else 0.0
@@ -291,6 +294,8 @@ def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: P
             break  # nothing to trace (no source, no geometry): more batches cannot help
     result = RenderResult(local.name, local.seed, film, rays, paths, found, time.perf_counter() - start, partial,
                           merged, list(local.warnings))
+    if merged > 1 and result.seconds > first[0]:
+        result.extra["steady_rays_per_second"] = (rays - first[1]) / (result.seconds - first[0])
     local.truncated = truncated
     local.finish(result)
     return result

@@ -22,7 +22,8 @@ import numpy as np
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
 from ..units import MM2_TO_M2
-from ..vec import dot, max3, norm, rows
+from ..scene import Aim
+from ..vec import axpy, dot, max3, norm, rows, scale
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
 
@@ -34,23 +35,30 @@ class ForwardTracer(Integrator):
     def __init__(self, scene, seed, batch_size=DEFAULT_BATCH):
         super().__init__(scene, seed, batch_size)
         self.max_depth = scene.forward["max_depth"]
-        tris, slots, power = [], [], []
+        tris, power, radiance, group = [], [], [], []
+        #: Emitters that sample directions alike (two-sidedness, aim) form one group, traced together.
+        self.emitter_groups: list[tuple[bool, Aim | None]] = []
         for slot, surf in enumerate(self.surfaces):
             if not isinstance(surf, Emitter):
                 continue
             t = self.objects[slot].triangles
             area = 0.5 * norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
             sides = 2.0 if surf.two_sided else 1.0
+            key = (surf.two_sided, surf.obj.material.aim)
+            if key not in self.emitter_groups:
+                self.emitter_groups.append(key)
             tris.append(t)
-            slots.append(np.full(len(t), slot))
             power.append(np.pi * surf.luminance * area * sides)  # cd/m^2 mm^2 sr = 1e-6 lm
-        self.emitter_tris = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
-        t = self.emitter_tris
-        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+            radiance.append(np.tile(surf.radiance_rgb, (len(t), 1)))
+            group.append(np.full(len(t), self.emitter_groups.index(key)))
+        t = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+        self.emitter_v0, self.emitter_e1, self.emitter_e2 = t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        cross = np.cross(self.emitter_e1, self.emitter_e2)
         self.emitter_area = 0.5 * norm(cross)  # mm^2
         self.emitter_normal = cross / np.where(self.emitter_area > 0, 2 * self.emitter_area, 1.0)[:, None]
-        self.emitter_slot = np.concatenate(slots) if slots else np.zeros(0, np.int64)
         self.emitter_power = np.concatenate(power) if power else np.zeros(0)
+        self.emitter_radiance = np.concatenate(radiance) if radiance else np.zeros((0, 3))  # cd/m^2, RGB
+        self.emitter_group = np.concatenate(group) if group else np.zeros(0, np.int64)
         self.total_flux_lm = float(self.emitter_power.sum() * MM2_TO_M2)
         if self.total_flux_lm <= 0:
             self.warnings.append("the scene has no emitter with positive flux: forward tracing has nothing to trace")
@@ -65,41 +73,36 @@ class ForwardTracer(Integrator):
     def emit(self, rng: np.random.Generator, n: int):
         """Particles: origins (n, 3) mm, directions (n, 3), flux (n, 3) in cd/m^2 mm^2 sr, alive (n,)."""
         tri, pmf = sample_discrete(self.emitter_power, rng.random(n))
-        t = self.emitter_tris[tri]
         b = uniform_triangle(rng.random((n, 2)))
-        points = t[:, 0] * (1 - b[:, :1] - b[:, 1:]) + t[:, 1] * b[:, :1] + t[:, 2] * b[:, 1:]
-        area = self.emitter_area[tri]
-        normal = np.take(self.emitter_normal, tri, axis=0)
-        slot = self.emitter_slot[tri]
-        pdf_pos = pmf / area
-        radiance = np.zeros((n, 3))
-        dirs = np.zeros((n, 3))
-        pdf_dir = np.zeros(n)
-        for s in np.unique(slot):
-            sel = np.nonzero(slot == s)[0]
-            surf: Emitter = self.surfaces[s]
-            nrm = normal[sel]
-            if surf.two_sided:
+        points = axpy(b[:, 1], rows(self.emitter_e2, tri), axpy(b[:, 0], rows(self.emitter_e1, tri),
+                                                                  rows(self.emitter_v0, tri)))
+        normal = rows(self.emitter_normal, tri)
+        pdf_pos = pmf / self.emitter_area[tri]
+        dirs = np.empty((n, 3))
+        pdf_dir = np.empty(n)
+        group = self.emitter_group[tri]
+        for g, (two_sided, aim) in enumerate(self.emitter_groups):
+            sel = np.flatnonzero(group == g) if len(self.emitter_groups) > 1 else np.arange(n)
+            nrm = rows(normal, sel)
+            if two_sided:
                 flip = rng.random(len(sel)) < 0.5
                 nrm = np.where(flip[:, None], -nrm, nrm)
                 pdf_pos[sel] *= 0.5
-            radiance[sel] = surf.radiance_rgb
-            d, p = self._directions(rng, surf, points[sel], nrm)
-            dirs[sel], pdf_dir[sel] = d, p
-            normal[sel] = nrm
+                normal[sel] = nrm
+            dirs[sel], pdf_dir[sel] = self._directions(rng, aim, rows(points, sel), nrm)
         cos = dot(dirs, normal)
         alive = (cos > 0) & (pdf_dir > 0)
-        flux = np.where(alive[:, None], radiance * (cos / np.where(alive, pdf_pos * pdf_dir, 1.0))[:, None], 0.0)
+        flux = scale(rows(self.emitter_radiance, tri), np.where(alive, cos / np.where(alive, pdf_pos * pdf_dir, 1.0),
+                                                                 0.0))
         origins = self.accel.spawn(points, normal, dirs) if self.accel else points
         return origins, dirs, flux, alive
 
-    def _directions(self, rng, surf: Surface, points: np.ndarray, normal: np.ndarray):
+    def _directions(self, rng, aim: Aim | None, points: np.ndarray, normal: np.ndarray):
         """Directions (m, 3) and their solid-angle pdf (m,) from the Lambertian law, mixed with the
-        emitter's aim target when it has one."""
+        emitters' aim target when they have one."""
         m = len(points)
         t, b, nn = frame_from_normal(normal)
         d = to_world(cosine_hemisphere(rng.random((m, 2))), t, b, nn)
-        aim = surf.obj.material.aim
         if aim is None or aim.share == 0:
             return d, np.maximum(dot(d, normal), 0.0) / np.pi
         d, _, p_t = self._directed_split(aim, points, d, rng)
