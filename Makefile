@@ -36,10 +36,19 @@ extension: $(STAMP)
 	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
 	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip
 
-# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 15 minutes on 2 cores).
+# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 17 minutes on 2 cores, and about 5 more
+# for Mitsuba: 4 presets x 2 integrators x 31 s of budgets, plus warm-ups).
+# Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15
+# crash it), installed here when missing; without root or apt-get it runs the scalar variant and says so.
+LLVM19 = ls /usr/lib/*/libLLVM.so.19* 2>/dev/null | head -n 1
+
 .PHONY: bench
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -r requirements-bench.lock
 	$(PY) benchmarks/convergence.py
+	@test -n "$$($(LLVM19))" || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && \
+		{ apt-get install -y -qq libllvm19 || { apt-get update -qq && apt-get install -y -qq libllvm19; }; }; } || \
+		echo "bench: libllvm19 could not be installed (needs root and apt-get): Mitsuba runs its scalar variant"
+	DRJIT_LIBLLVM_PATH="$$($(LLVM19))" $(PY) benchmarks/mitsuba_peer.py
 	$(PY) benchmarks/throughput.py --seconds 20
 	$(PY) benchmarks/eyebox.py --half 90 30 --step 10

@@ -94,6 +94,7 @@ def errors(y: np.ndarray, ref: dict, wall: float) -> dict:
 
 def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[dict]:
     scene = load_scene(folder)
+    region = bright_region(ref["y"])
     rows = []
     for method in INTEGRATORS:
         for k, seconds in enumerate(budgets):
@@ -103,40 +104,131 @@ def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[di
             y = luminance(res.film.rgb())
             row = {"preset": name, "method": method, "budget_s": seconds, "seconds": wall, "rays": res.rays,
                    "paths": res.paths, "method_efficiency": res.efficiency} | errors(y, ref, wall)
+            row |= {"mean_image": float(y.mean()), "mean_region": float(y[region].mean()), "status": "ok"}
             rows.append(row)
             print(f"{name:17s} {method:9s} {seconds:5.1f} s  rays {res.rays:>11,}  rel RMSE image "
                   f"{row['rel_rmse_image']:.3g}  region {row['rel_rmse_region']:.3g}", flush=True)
     return rows
 
 
+#: CSV columns: ours fill spp with nothing; status is "ok" or "cannot render: <why>" (not charted).
+FIELDS = ["preset", "method", "budget_s", "seconds", "rays", "paths", "method_efficiency", "rel_rmse_image",
+          "time_efficiency_image", "rel_rmse_region", "time_efficiency_region", "spp", "mean_image", "mean_region",
+          "status"]
+
+
+def write_rows(name: str, rows: list[dict]):
+    """benchmarks/results/<name>.csv with :data:`FIELDS` (missing fields left empty)."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / f"{name}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS, restval="")
+        w.writeheader()
+        w.writerows(rows)
+
+
+def read_rows(name: str) -> list[dict]:
+    """The rows of benchmarks/results/<name>.csv, numbers as float, empty or missing fields as None (a CSV
+    written before the status column charts every row)."""
+    def value(text: str):
+        if text == "":
+            return None
+        try:
+            return float(text)
+        except ValueError:
+            return text
+
+    with open(RESULTS / f"{name}.csv", newline="") as f:
+        rows = [{k: value(r.get(k) or "") for k in FIELDS} for r in csv.DictReader(f)]
+    return [r | {"status": r["status"] or "ok"} for r in rows]
+
+
+def noise_floor(ref: dict) -> float:
+    """The reference's own relative RMS noise per pixel: an error much below it cannot be measured (the
+    subtraction of its variance then leaves noise, or 0)."""
+    return math.sqrt(float(np.mean(ref["var"]))) / float(np.mean(ref["y"]))
+
+
+def charted(row: dict) -> bool:
+    return row["status"] == "ok" and row["rel_rmse_image"] > 0
+
+
 def chart(name: str, rows: list[dict], ref: dict):
+    """docs/convergence-<name>.png: one line per method in ``rows`` (in their order), rows that cannot
+    render left out (named in the legend); the tracer's methods in solid lines, peers (Mitsuba) dashed
+    with triangles; the reference's own noise as a horizontal line."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    for i, method in enumerate(INTEGRATORS):
-        r = [x for x in rows if x["method"] == method and x["rel_rmse_image"] > 0]
+    methods = list(dict.fromkeys(x["method"] for x in rows))
+    for i, method in enumerate(methods):
+        r = [x for x in rows if x["method"] == method and charted(x)]
         if not r:
+            black = [x for x in rows if x["method"] == method and x["status"].startswith("cannot render")]
+            if black:
+                ax.plot([], [], " ", label=f"{method}: cannot render (black)")
             continue
         t = np.array([x["seconds"] for x in r])
         e = np.array([x["rel_rmse_image"] for x in r])
         er = np.array([x["rel_rmse_region"] for x in r])
         color = f"C{i}"
-        ax.loglog(t, e, "o-", color=color, label=f"{method}: whole image")
-        ax.loglog(t, er, "s:", color=color, label=f"{method}: bright region")
+        ours = method in INTEGRATORS
+        ax.loglog(t, e, "o-" if ours else "^--", color=color, label=f"{method}: whole image")
+        ax.loglog(t, er, "s:" if ours else "v:", color=color, label=f"{method}: bright region")
         ax.loglog(t, e[0] * (t / t[0]) ** -0.5, "--", color="0.6", lw=0.8)
-    ax.set_xlabel("wall time, s (one process)")
+    ax.axhline(noise_floor(ref), color="0.5", ls="-.", lw=0.8, label="reference's own noise (whole image)")
+    ax.set_xlabel("wall time, s (one process, one thread)")
     ax.set_ylabel("relative RMSE against the reference")
     ax.set_title(f"{name}: reference {str(ref['method'])} {float(ref['seconds']):.0f} s, "
                  f"{int(ref['rays']):,} rays; grey: slope -1/2", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     DOCS.mkdir(exist_ok=True)
     fig.savefig(DOCS / f"convergence-{name}.png", dpi=110)
     plt.close(fig)
+
+
+def summary_table(rows_by_preset: dict[str, list[dict]], budget: float) -> list[str]:
+    """The summary's table: the last budget of every method of every preset; a method that cannot
+    render shows its mean luminance against the reference's instead of errors."""
+    lines = ["| preset | method | seconds | rays | rel. RMSE image | rel. RMSE bright region | "
+             "1/(rel. MSE x s) image |", "|---|---|---|---|---|---|---|"]
+    for name, rows in rows_by_preset.items():
+        for r in rows:
+            if r["budget_s"] != budget:
+                continue
+            rays = f"{int(r['rays']):,}" if r["rays"] is not None else f"- ({int(r['paths']):,} paths)"
+            if r["status"] == "ok":
+                lines.append(f"| {name} | {r['method']} | {r['seconds']:.1f} | {rays} | {r['rel_rmse_image']:.3g} | "
+                             f"{r['rel_rmse_region']:.3g} | {r['time_efficiency_image']:.3g} |")
+            else:
+                lines.append(f"| {name} | {r['method']} | {r['seconds']:.1f} | {rays} | cannot render: mean "
+                             f"{r['mean_image']:.3g} cd/m² | {r['mean_region']:.3g} cd/m² | - |")
+    return lines
+
+
+def forward_backward_note(rows_by_preset: dict[str, list[dict]], budget: float) -> list[str]:
+    """hud-direct: forward against backward on the symbols, beside the paper's figure."""
+    last = {r["method"]: r for r in rows_by_preset.get("hud-direct", []) if r["budget_s"] == budget}
+    if not {"forward", "backward"} <= set(last):
+        return []
+    ratio = last["forward"]["time_efficiency_region"] / last["backward"]["time_efficiency_region"]
+    return [f"hud-direct, symbols: forward is {ratio:.0f} times as efficient as backward (1/(MSE x time)); the "
+            f"paper: {PAPER_BACKWARD_H / PAPER_FORWARD_H:.0f} times the time (4 hours against 2 days), i.e. 2-3 "
+            "orders of magnitude in its words."]
+
+
+def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -> str:
+    """benchmarks/results/summary.md from the presets' CSVs, with ``sections`` (Markdown) appended."""
+    rows = {name: read_rows(name) for name in presets}
+    text = "\n".join(summary_table(rows, budget)) + "\n\n" + "\n".join(forward_backward_note(rows, budget)) + "\n"
+    for section in sections:
+        text += "\n" + section.rstrip() + "\n"
+    (RESULTS / "summary.md").write_text(text)
+    return text
 
 
 def main():
@@ -146,36 +238,13 @@ def main():
     ap.add_argument("--ref-seconds", type=float, default=120.0)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    notes = []
-    summary = ["| preset | method | seconds | rays | rel. RMSE image | rel. RMSE bright region | "
-               "1/(rel. MSE x s) image |", "|---|---|---|---|---|---|---|"]
     for name in args.presets:
-        folder = PRESETS[name].write(CACHE / "scenes" / name) if not (CACHE / "scenes" / name).exists() \
-            else CACHE / "scenes" / name
-        ref_seconds = args.ref_seconds if name in REFERENCE_METHOD else args.ref_seconds / 3
-        ref = reference(name, folder, ref_seconds, args.workers)
+        folder = scene_folder(name)
+        ref = reference(name, folder, reference_seconds(name, args.ref_seconds), args.workers)
         rows = measure(name, folder, ref, args.budgets)
-        with open(RESULTS / f"{name}.csv", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        write_rows(name, rows)
         chart(name, rows, ref)
-        for r in rows:
-            if r["budget_s"] == max(args.budgets):
-                summary.append(f"| {name} | {r['method']} | {r['seconds']:.1f} | {r['rays']:,} | "
-                               f"{r['rel_rmse_image']:.3g} | {r['rel_rmse_region']:.3g} | "
-                               f"{r['time_efficiency_image']:.3g} |")
-        if name == "hud-direct":
-            last = {r["method"]: r for r in rows if r["budget_s"] == max(args.budgets)}
-            if {"forward", "backward"} <= set(last):
-                ratio = last["forward"]["time_efficiency_region"] / last["backward"]["time_efficiency_region"]
-                notes.append(f"hud-direct, symbols: forward is {ratio:.0f} times as efficient as backward "
-                             f"(1/(MSE x time)); the paper: {PAPER_BACKWARD_H / PAPER_FORWARD_H:.0f} times the time "
-                             "(4 hours against 2 days), i.e. 2-3 orders of magnitude in its words.")
-    text = "\n".join(summary) + "\n\n" + "\n".join(notes) + "\n"
-    (RESULTS / "summary.md").write_text(text)
-    print(text)
+    print(write_summary(args.presets, max(args.budgets)))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import axpy, dot, max3, norm, rows, scale
+from .vec import axpy, dot, max3, norm, rows
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6

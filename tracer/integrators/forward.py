@@ -21,8 +21,8 @@ import numpy as np
 
 from ..optics.surfaces import Emitter, Surface
 from ..sampling import cosine_hemisphere, frame_from_normal, sample_discrete, to_world, uniform_triangle
-from ..units import MM2_TO_M2
 from ..scene import Aim
+from ..units import MM2_TO_M2
 from ..vec import axpy, dot, max3, norm, rows, scale
 from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
 
