@@ -2,7 +2,7 @@
 the same run on the same geometry (the hud-direct preset unless another scene is named), on one
 process and on several.
 
-    .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S] [--workers W]
+    .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S] [--workers W] [--repeats R]
 
 Raw rates, one core: (1) one Embree call on 2^20 rays with random origins in the scene's bounding
 box and random directions, best of 5 (the ceiling the speed goal is stated against); (2) the very
@@ -10,7 +10,8 @@ rays each method traces (recorded from 8 of its batches, bounce by bounce, and r
 same Embree calls, best of 5): the ceiling for that method's ray mix, which hits more geometry than
 random rays do. End to end: the forward and the backward method for S seconds each (everything:
 sampling, shading, film), on one process and on W worker processes (tracer.parallel; the time
-includes starting the workers). "Steady" rates leave out the first batch (worker start-up, first
+includes starting the workers), alternating R times (medians reported: the machine's speed drifts
+between runs). "Steady" rates leave out the first batch (worker start-up, first
 calls), as a long render sees them. Peak memory is the largest resident set of this process and of
 its workers.
 """
@@ -84,6 +85,7 @@ def main():
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
@@ -92,17 +94,23 @@ def main():
         print(f"raw embreex intersection rate: {raw:,.0f} rays/s (one call on 2^20 random rays, best of 5)")
         for method in ("forward", "backward"):
             own = own_rays_rate(INTEGRATORS[method](scene, 99))
-            res = INTEGRATORS[method](scene, 1).render(Budget(seconds=args.seconds))
-            steady = res.extra["steady_rays_per_second"]
             print(f"{method:8s} raw embreex on its own rays: {own:,.0f} rays/s")
-            print(f"{method:8s} end to end: {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
-                  f"{res.seconds:.1f} s) = {res.rays_per_second / raw:.2f} of raw, {res.rays_per_second / own:.2f} "
-                  f"of raw on its own rays; steady {steady:,.0f}; efficiency {res.efficiency:.3g}")
-            par = render_parallel(INTEGRATORS[method](scene, 1), Budget(seconds=args.seconds), args.workers)
-            par_steady = par.extra["steady_rays_per_second"]
-            print(f"{method:8s} on {args.workers} processes: {par.rays_per_second:,.0f} rays/s "
-                  f"({par.rays:,} rays in {par.seconds:.1f} s) = {par.rays_per_second / res.rays_per_second:.2f} x "
-                  f"one process; steady {par_steady:,.0f} = {par_steady / steady:.2f} x")
+            # One process and W processes alternate, --repeats times, and the medians are compared:
+            # this machine's speed drifts by tens of percent between runs a minute apart.
+            one, many = [], []
+            for r in range(args.repeats):
+                res = INTEGRATORS[method](scene, 1 + r).render(Budget(seconds=args.seconds))
+                par = render_parallel(INTEGRATORS[method](scene, 1 + r), Budget(seconds=args.seconds), args.workers)
+                one.append((res.rays_per_second, res.extra["steady_rays_per_second"]))
+                many.append((par.rays_per_second, par.extra["steady_rays_per_second"]))
+                print(f"{method:8s} run {r + 1}: one process {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
+                      f"{res.seconds:.1f} s), {args.workers} processes {par.rays_per_second:,.0f} rays/s "
+                      f"({par.rays:,} rays in {par.seconds:.1f} s); efficiency {res.efficiency:.3g}")
+            (rate, steady), (par_rate, par_steady) = np.median(one, axis=0), np.median(many, axis=0)
+            print(f"{method:8s} end to end (median): {rate:,.0f} rays/s = {rate / raw:.2f} of raw, {rate / own:.2f} "
+                  f"of raw on its own rays")
+            print(f"{method:8s} on {args.workers} processes (median): {par_rate:,.0f} rays/s = {par_rate / rate:.2f} x "
+                  f"one process; steady (without the first batch) {par_steady / steady:.2f} x")
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         print(f"peak memory: {own:.0f} MiB (this process), {kids:.0f} MiB (largest worker)")

@@ -264,12 +264,11 @@ def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: P
         if should_stop is not None and not budget_met and should_stop():
             partial = True
             break
-        if not budget_met:
-            while len(pending) < in_flight:
-                pending[next_index] = submit(next_index)
-                next_index += 1
-        elif not pending:
-            break
+        if budget_met:
+            break  # batches still in flight would land beyond the budget: dropped, not awaited
+        while len(pending) < in_flight:
+            pending[next_index] = submit(next_index)
+            next_index += 1
         finished = [k for k, f in pending.items() if f.done()]
         if not finished:
             time.sleep(0.002)
