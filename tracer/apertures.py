@@ -35,14 +35,15 @@ class MeshTarget:
 
     def __init__(self, triangles: np.ndarray):
         self.triangles = triangles
-        self.area = float(triangle_areas(triangles).sum())
+        self.areas = triangle_areas(triangles)  # mm^2
+        self.area = float(self.areas.sum())
         n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]).sum(axis=0)
         self.normal = n / np.linalg.norm(n)
         faces = np.arange(3 * len(triangles)).reshape(-1, 3)
         self._accel = Accelerator([(triangles.reshape(-1, 3), faces)])
 
     def sample(self, origins: np.ndarray, u: np.ndarray):
-        points, _, _ = sample_triangles(self.triangles, u)
+        points, _, _ = sample_triangles(self.triangles, u, self.areas)
         v = points - origins
         dist = norm(v)
         d = v / np.maximum(dist, 1e-300)[:, None]

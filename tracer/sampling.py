@@ -459,7 +459,7 @@ def triangle_areas(tris: np.ndarray) -> np.ndarray:
 
 
 def sample_triangles(
-    tris: np.ndarray, u: np.ndarray
+    tris: np.ndarray, u: np.ndarray, areas: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Uniform points on a triangle mesh (density 1/total_area per unit area).
 
@@ -472,6 +472,8 @@ def sample_triangles(
         Vertices (mm); at least one triangle must have a positive area.
     u : ndarray, shape (n, 3)
         Uniform numbers in [0, 1).
+    areas : ndarray, shape (m,), optional
+        :func:`triangle_areas` of ``tris``, for callers that sample the same mesh many times.
 
     Returns
     -------
@@ -488,7 +490,7 @@ def sample_triangles(
     """
     tris = np.asarray(tris, dtype=np.float64)
     u = np.asarray(u, dtype=np.float64)
-    tri_index, _ = sample_discrete(triangle_areas(tris), u[:, 0])
+    tri_index, _ = sample_discrete(triangle_areas(tris) if areas is None else areas, u[:, 0])
     b12 = uniform_triangle(u[:, 1:])
     bary = np.concatenate([1.0 - b12[:, :1] - b12[:, 1:], b12], axis=-1)
     t = tris[tri_index]

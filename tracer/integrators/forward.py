@@ -35,20 +35,18 @@ class ForwardTracer(Integrator):
     def __init__(self, scene, seed, batch_size=DEFAULT_BATCH):
         super().__init__(scene, seed, batch_size)
         self.max_depth = scene.forward["max_depth"]
-        tris, power, radiance, group = [], [], [], []
+        tris, lum_sides, radiance, group = [], [], [], []
         #: Emitters that sample directions alike (two-sidedness, aim) form one group, traced together.
         self.emitter_groups: list[tuple[bool, Aim | None]] = []
         for slot, surf in enumerate(self.surfaces):
             if not isinstance(surf, Emitter):
                 continue
             t = self.objects[slot].triangles
-            area = 0.5 * norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-            sides = 2.0 if surf.two_sided else 1.0
             key = (surf.two_sided, surf.obj.material.aim)
             if key not in self.emitter_groups:
                 self.emitter_groups.append(key)
             tris.append(t)
-            power.append(np.pi * surf.luminance * area * sides)  # cd/m^2 mm^2 sr = 1e-6 lm
+            lum_sides.append(np.full((len(t), 2), (surf.luminance, 2.0 if surf.two_sided else 1.0)))
             radiance.append(np.tile(surf.radiance_rgb, (len(t), 1)))
             group.append(np.full(len(t), self.emitter_groups.index(key)))
         t = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
@@ -56,7 +54,8 @@ class ForwardTracer(Integrator):
         cross = np.cross(self.emitter_e1, self.emitter_e2)
         self.emitter_area = 0.5 * norm(cross)  # mm^2
         self.emitter_normal = cross / np.where(self.emitter_area > 0, 2 * self.emitter_area, 1.0)[:, None]
-        self.emitter_power = np.concatenate(power) if power else np.zeros(0)
+        lum, sides = (np.concatenate(lum_sides) if lum_sides else np.zeros((0, 2))).T
+        self.emitter_power = np.pi * lum * self.emitter_area * sides  # cd/m^2 mm^2 sr = 1e-6 lm
         self.emitter_radiance = np.concatenate(radiance) if radiance else np.zeros((0, 3))  # cd/m^2, RGB
         self.emitter_group = np.concatenate(group) if group else np.zeros(0, np.int64)
         self.total_flux_lm = float(self.emitter_power.sum() * MM2_TO_M2)
