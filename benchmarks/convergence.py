@@ -3,10 +3,12 @@
     .venv/bin/python benchmarks/convergence.py [--presets P ...] [--budgets 1 2 4 8 16] [--ref-seconds 120]
 
 For each preset a high-sample reference image is rendered once and cached by scene hash in
-benchmarks/cache/ (not committed): the method the preset is made for (forward for hud-direct,
-backward for the analytic scenes), seed 1000 and up, on every core, for --ref-seconds (the analytic
-scenes get a third of it). Then every method renders at each budget in seconds (one process, seed =
-budget index), and the script records wall time, rays, the method's own efficiency, the relative RMSE
+benchmarks/cache/ (not committed): backward tracing with next-event estimation, the best method for
+every preset here, seed 1000 and up, on every core, for --ref-seconds (the analytic scenes get a third
+of it). Then every method variant (forward; backward with next-event estimation; backward without it,
+the paper's plain method: benchmarks/throughput.py's VARIANTS) renders at each budget in seconds (one
+process, seed = budget index), and the script records wall time, rays, the method's own efficiency,
+the relative RMSE
 against the reference over the whole image and over the bright region (pixels above 10 % of the
 reference's 99th percentile: the symbols of hud-direct, the lit panel of analytic-mirror), with the
 reference's own noise subtracted from the mean squared error, and the time efficiency
@@ -30,23 +32,28 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.throughput import VARIANTS, make  # noqa: E402
 from presets import PRESETS  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import luminance  # noqa: E402
+from tracer.world import World  # noqa: E402
 
 CACHE = ROOT / "benchmarks" / "cache"
 RESULTS = ROOT / "benchmarks" / "results"
 DOCS = ROOT / "docs"
-REFERENCE_METHOD = {"hud-direct": "forward"}  # the rest: backward
+#: The reference's method (backward with next-event estimation) and the presets that get the full
+#: --ref-seconds (the rest, closed-form scenes, a third).
+REFERENCE_METHOD = "backward"
+FULL_REFERENCE = ("hud-direct",)
 #: The paper's figure for hud-direct (sec. 4.2): forward 4 hours, backward 2 days.
 PAPER_FORWARD_H, PAPER_BACKWARD_H = 4.0, 48.0
 
 
 def reference(name: str, folder: Path, seconds: float, workers: int) -> dict:
     scene = load_scene(folder)
-    method = REFERENCE_METHOD.get(name, "backward")
+    method = REFERENCE_METHOD
     path = CACHE / f"{name}-{scene.scene_hash}-{method}-{seconds:g}s.npz"
     if path.is_file():
         data = np.load(path)
@@ -68,7 +75,7 @@ def scene_folder(name: str) -> Path:
 
 def reference_seconds(name: str, ref_seconds: float) -> float:
     """The reference's budget: ``ref_seconds`` for hud-direct, a third of it for the analytic scenes."""
-    return ref_seconds if name in REFERENCE_METHOD else ref_seconds / 3
+    return ref_seconds if name in FULL_REFERENCE else ref_seconds / 3
 
 
 def bright_region(y_ref: np.ndarray) -> np.ndarray:
@@ -93,13 +100,13 @@ def errors(y: np.ndarray, ref: dict, wall: float) -> dict:
 
 
 def measure(name: str, folder: Path, ref: dict, budgets: list[float]) -> list[dict]:
-    scene = load_scene(folder)
+    world = World(load_scene(folder))
     region = bright_region(ref["y"])
     rows = []
-    for method in INTEGRATORS:
+    for method in VARIANTS:
         for k, seconds in enumerate(budgets):
             start = time.perf_counter()
-            res = INTEGRATORS[method](scene, k).render(Budget(seconds=seconds))
+            res = make(world, method, k).render(Budget(seconds=seconds))
             wall = time.perf_counter() - start
             y = luminance(res.film.rgb())
             row = {"preset": name, "method": method, "budget_s": seconds, "seconds": wall, "rays": res.rays,
@@ -174,7 +181,7 @@ def chart(name: str, rows: list[dict], ref: dict):
         e = np.array([x["rel_rmse_image"] for x in r])
         er = np.array([x["rel_rmse_region"] for x in r])
         color = f"C{i}"
-        ours = method in INTEGRATORS
+        ours = method in VARIANTS
         ax.loglog(t, e, "o-" if ours else "^--", color=color, label=f"{method}: whole image")
         ax.loglog(t, er, "s:" if ours else "v:", color=color, label=f"{method}: bright region")
         ax.loglog(t, e[0] * (t / t[0]) ** -0.5, "--", color="0.6", lw=0.8)
@@ -211,14 +218,25 @@ def summary_table(rows_by_preset: dict[str, list[dict]], budget: float) -> list[
 
 
 def forward_backward_note(rows_by_preset: dict[str, list[dict]], budget: float) -> list[str]:
-    """hud-direct: forward against backward on the symbols, beside the paper's figure."""
+    """hud-direct: forward against the paper's plain backward method on the symbols, beside the paper's
+    figure, and backward with next-event estimation against both and against Mitsuba's path tracer."""
     last = {r["method"]: r for r in rows_by_preset.get("hud-direct", []) if r["budget_s"] == budget}
-    if not {"forward", "backward"} <= set(last):
-        return []
-    ratio = last["forward"]["time_efficiency_region"] / last["backward"]["time_efficiency_region"]
-    return [f"hud-direct, symbols: forward is {ratio:.0f} times as efficient as backward (1/(MSE x time)); the "
-            f"paper: {PAPER_BACKWARD_H / PAPER_FORWARD_H:.0f} times the time (4 hours against 2 days), i.e. 2-3 "
-            "orders of magnitude in its words."]
+    lines = []
+    if {"forward", "backward, no NEE"} <= set(last):
+        ratio = last["forward"]["time_efficiency_region"] / last["backward, no NEE"]["time_efficiency_region"]
+        lines.append(f"hud-direct, symbols: forward is {ratio:.0f} times as efficient as the paper's plain backward "
+                     f"method (1/(MSE x time)); the paper: {PAPER_BACKWARD_H / PAPER_FORWARD_H:.0f} times the time "
+                     "(4 hours against 2 days), i.e. 2-3 orders of magnitude in its words.")
+    if {"forward", "backward"} <= set(last) and last["backward"]["status"] == "ok":
+        ratio = last["backward"]["time_efficiency_image"] / last["forward"]["time_efficiency_image"]
+        line = (f"hud-direct, whole image: backward with next-event estimation is {ratio:.0f} times as efficient as "
+                f"forward (relative RMSE {last['backward']['rel_rmse_image']:.3g} against "
+                f"{last['forward']['rel_rmse_image']:.3g} at {budget:g} s)")
+        if "mitsuba-path" in last and last["mitsuba-path"]["status"] == "ok":
+            line += (f"; Mitsuba's path tracer reaches {last['mitsuba-path']['rel_rmse_image']:.3g} in the same "
+                     "time")
+        lines.append(line + ".")
+    return lines
 
 
 def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -> str:

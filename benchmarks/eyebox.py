@@ -12,6 +12,7 @@ value at the design eye position.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import tempfile
 from pathlib import Path
@@ -22,29 +23,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
 from tracer.analysis import specular_paths  # noqa: E402
-from tracer.integrators import INTEGRATORS  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import Y_WEIGHTS  # noqa: E402
+from tracer.world import World  # noqa: E402
 
 
-def field_luminance(scene, offset_right: float, offset_up: float, field_deg) -> np.ndarray:
+def field_luminance(world: World, offset_right: float, offset_up: float, field_deg) -> np.ndarray:
     """Predicted luminance (cd/m^2), clear LCD, of five points of the virtual image (its centre and
     points at 80 % of the half-field toward its corners, fixed in space at the accommodation
     distance) seen from the eye moved by the given offsets (mm)."""
-    eye = scene.eye
+    eye = world.scene.eye
     right = np.cross(eye.gaze, eye.up)
     right /= np.linalg.norm(right)
     up = np.cross(right, eye.gaze)
     tx, ty = (0.8 * np.tan(np.radians(f) / 2) for f in field_deg)
     corners = [(0, 0), (-tx, ty), (tx, ty), (-tx, -ty), (tx, -ty)]
-    base = eye.position.copy()
+    base = eye.position
     dist = eye.accommodation_distance_mm
     points = np.array([base + dist * (eye.gaze + a * right + b * up) for a, b in corners])
-    eye.position = base + offset_right * right + offset_up * up
-    try:
-        res = specular_paths(INTEGRATORS["backward"](scene, 0), directions=points - eye.position)
-    finally:
-        eye.position = base
+    moved = dataclasses.replace(eye, position=base + offset_right * right + offset_up * up)
+    res = specular_paths(world.with_eye(moved), directions=points - moved.position)
     total = np.zeros(len(points))
     for p in res["paths"]:
         np.add.at(total, p["pixel"], p["luminance"] @ Y_WEIGHTS)
@@ -64,14 +62,15 @@ def main():
         for o in scene.objects:
             if o.material.type == "lcd":
                 o.material.params["image"] = np.ones_like(o.material.params["image"])
-        ref = field_luminance(scene, 0.0, 0.0, args.field)
+        world = World(scene)
+        ref = field_luminance(world, 0.0, 0.0, args.field)
         print(f"design eye: centre {ref[0]:.0f} cd/m^2, corners {', '.join(f'{v:.0f}' for v in ref[1:])}")
         xs = np.arange(-args.half[0], args.half[0] + 1e-9, args.step)
         zs = np.arange(-args.half[1], args.half[1] + 1e-9, args.step)
         ok = np.zeros((len(zs), len(xs)), bool)
         for j, z in enumerate(zs):
             for i, x in enumerate(xs):
-                ok[j, i] = np.all(field_luminance(scene, x, z, args.field) >= 0.5 * ref)
+                ok[j, i] = np.all(field_luminance(world, x, z, args.field) >= 0.5 * ref)
         print("eye offset grid (rows: up, mm; columns: right, mm); # = whole field >= 50 % of design")
         print("       " + "".join(f"{x:>5.0f}" for x in xs))
         for j in range(len(zs) - 1, -1, -1):

@@ -105,9 +105,9 @@ def check_bsdfs() -> tuple[bool, str]:
     pdf = np.array(diffuser.pdf(mi.BSDFContext(), si, wo))
     value = np.array(diffuser.eval(mi.BSDFContext(), si, wo)).T
     # The tracer's frame (GaussianDiffuser._frame): the exit normal -z (the light travels along -wi).
-    t, b, n = frame_from_normal(np.tile([0.0, 0.0, -1.0], (len(out), 1)), axis)
-    beta_d = to_local(np.tile(-wi, (len(out), 1)), t, b, n)[:, :2]
-    expected = gaussian_lobe_pdf(to_local(out, t, b, n), beta_d, sigma)
+    t, b, n = frame_from_normal(np.tile([[0.0], [0.0], [-1.0]], (1, len(out))), axis)
+    beta_d = to_local(np.tile(-wi[:, None], (1, len(out))), t, b, n)[:2]
+    expected = gaussian_lobe_pdf(to_local(out.T, t, b, n), beta_d, sigma)
     pdf_err = float(np.abs(pdf - expected).max() / expected.max())
     value_err = float(np.abs(value - tau * expected[:, None]).max() / expected.max())
     transmitter = mi.load_dict({"type": "hud_lambertian_transmitter", "rho": mi.ScalarColor3f(0.2, 0.3, 0.1),
@@ -126,7 +126,7 @@ def check_hdri() -> tuple[bool, str]:
     height, width = 128, 256
     spot = np.array([[math.cos(math.radians(20)) * math.cos(math.radians(60)),
                       math.cos(math.radians(20)) * math.sin(math.radians(60)), math.sin(math.radians(20))]])
-    u, v = direction_to_equirect(spot)
+    u, v = direction_to_equirect(spot.T)
     row, col = int((1 - v[0]) * height), int(u[0] * width)
     image = np.full((height, width), 1e-3)
     image[row, col] = 1.0

@@ -49,6 +49,8 @@ from benchmarks import convergence as cv  # noqa: E402
 from benchmarks import mitsuba_scene as ms  # noqa: E402
 from benchmarks.mitsuba_checks import run_checks  # noqa: E402
 from presets import PRESETS  # noqa: E402
+from tracer.optics.bsdf import DELTA  # noqa: E402
+from tracer.optics.materials import MATERIALS  # noqa: E402
 from tracer.scene import Scene, load_scene  # noqa: E402
 from tracer.units import luminance  # noqa: E402
 
@@ -57,8 +59,6 @@ KINDS = ("path", "ptracer")
 PASS_SECONDS = 0.25
 #: A render whose bright-region mean luminance is below this fraction of the reference's cannot render.
 BLACK = 0.01
-#: Materials whose scattering is a delta distribution in Mitsuba (no connection to the lens through them).
-DELTA_MATERIALS = ("mirror", "dielectric", "coating", "lcd")
 
 
 def render_passes(mi_scene, integrator, spp: int, seeds: list[int]) -> dict:
@@ -95,7 +95,7 @@ def warm_up(mi_scene, integrator) -> dict:
 
 
 def cannot_render_reason(scene: Scene) -> str:
-    delta = [o.name for o in scene.traced_objects if o.material.type in DELTA_MATERIALS]
+    delta = [o.name for o in scene.traced_objects if MATERIALS[o.material.type].flags & DELTA]
     return (f"cannot render: the eye sees every lit surface only through specular (delta) surfaces "
             f"({', '.join(delta)}), and a particle tracer cannot connect a particle to the lens through them")
 

@@ -41,12 +41,16 @@ Materials (tracer/optics/surfaces.py against Mitsuba 3.9's plugins):
   perpendicular, |beta| >= 1 absorbed); mitsuba_checks.py compares its pdf with
   tracer.sampling.gaussian_lobe_pdf and runs Mitsuba's chi-square test on its sampling.
 - ``absorber`` -> ``diffuse(reflectance=0)``.
-- ``emitter`` -> an ``area`` emitter of radiance L c on a black diffuse surface (the tracer's
-  emitters absorb); the luminance from a flux comes from tracer.scene.emitter_luminance, so a flux is
+- ``aperture`` -> nothing (not traced).
+- an object's emission block -> an ``area`` emitter of radiance L c on the object's own BSDF; the
+  luminance from a flux is the tracer's own (tracer.lights.make_emission, at load), so a flux is
   converted exactly as the tracer does. Mitsuba's area lights emit on the front side only: a
   two-sided emitter gets a second, flipped copy of its triangles, and both copies are moved
   apart by 1e-5 (1 + max |x|) mm along their own normals so that each is hit first from its side.
-- ``aperture`` -> nothing (not traced).
+
+The converter checks itself against the tracer's material schema when it is imported
+(:data:`MAPPED_FIELDS`): a material or a field the schema has and this mapping does not read stops
+the benchmark, so a new material cannot be compared silently wrong.
 
 Environment: ``none`` -> none, ``uniform`` -> ``constant``, ``hdri`` -> ``envmap`` of the same pixels
 with ``scale`` = the tracer's calibration factor k and ``to_world`` = R_z(rotation_deg) times the map of
@@ -80,8 +84,8 @@ import numpy as np
 
 from tracer.environment import HdriEnvironment, UniformEnvironment
 from tracer.imageio import read_image
-from tracer.optics.surfaces import LCD
-from tracer.scene import Scene, SceneObject, emitter_luminance
+from tracer.optics.materials import MATERIALS
+from tracer.scene import Scene, SceneObject
 from tracer.units import luminance
 
 _LLVM = os.environ.get("DRJIT_LIBLLVM_PATH", "")
@@ -308,6 +312,36 @@ def _black() -> dict:
     return {"type": "diffuse", "reflectance": _rgb(0.0)}
 
 
+#: The fields of each material that :func:`bsdf` reads (checked against the schema at import).
+MAPPED_FIELDS = {
+    "mirror": {"reflectance"}, "dielectric": {"ior", "ior_outside"}, "coating": {"reflectance", "transmittance"},
+    "absorber": set(), "aperture": set(), "lambertian": {"reflectance"},
+    "lambertian_transmitter": {"reflectance", "transmittance"}, "diffuser": {"transmittance", "sigma_deg"},
+    "lcd": {"image", "image_encoding", "transmittance", "contrast_ratio"},
+}
+
+
+def check_against_schema():
+    """Raise if the tracer's schema has a material, or a field of one, that this converter does not map."""
+    missing = set(MATERIALS) - set(MAPPED_FIELDS)
+    if missing:
+        raise NotImplementedError(f"mitsuba_scene.py has no mapping for the material(s) {sorted(missing)}")
+    for name, cls in MATERIALS.items():
+        unread = {f.name for f in cls.schema.fields} - MAPPED_FIELDS[name]
+        if unread:
+            raise NotImplementedError(f"mitsuba_scene.py ignores the field(s) {sorted(unread)} of {name!r}")
+
+
+check_against_schema()
+
+
+def lcd_cells(params: dict) -> np.ndarray:
+    """(H, W, 3) transmittance of every LCD cell: transmittance (1/CR + (1 - 1/CR) image), as the
+    tracer's LCD (tracer/optics/materials.py); the image was decoded by its encoding at load."""
+    cr = params["contrast_ratio"]
+    return params["transmittance"] * (1.0 / cr + (1.0 - 1.0 / cr) * params["image"])
+
+
 def bsdf(obj: SceneObject) -> dict:
     """The Mitsuba BSDF dict of a traced object's material (module docstring)."""
     m = obj.material
@@ -318,12 +352,8 @@ def bsdf(obj: SceneObject) -> dict:
     if m.type == "dielectric":
         return {"type": "dielectric", "int_ior": p["ior"], "ext_ior": p["ior_outside"]}
     if m.type == "lcd":
-        transmittance = LCD(obj).transmittance
-        h, w = p["image"].shape[:2]
-        u, v = np.meshgrid((np.arange(w) + 0.5) / w, 1.0 - (np.arange(h) + 0.5) / h)
-        cells = transmittance(np.stack([u.ravel(), v.ravel()], axis=1)).reshape(h, w, 3)
         return {"type": "thindielectric", "int_ior": 1.0, "ext_ior": 1.0,
-                "specular_reflectance": _rgb(0.0), "specular_transmittance": _raw_bitmap(cells)}
+                "specular_reflectance": _rgb(0.0), "specular_transmittance": _raw_bitmap(lcd_cells(p))}
     if m.type == "coating":
         yr, yt = float(luminance(p["reflectance"])), float(luminance(p["transmittance"]))
         if yt == 0:
@@ -344,10 +374,10 @@ def bsdf(obj: SceneObject) -> dict:
         return {"type": "hud_lambertian_transmitter", "rho": mi.ScalarColor3f(p["reflectance"]),
                 "tau": mi.ScalarColor3f(p["transmittance"])}
     if m.type == "diffuser":
+        sigma = np.sin(np.radians(p["sigma_deg"]))  # direction cosines, as tracer GaussianDiffuser
         return {"type": "hud_diffuser", "tau": mi.ScalarColor3f(p["transmittance"]),
-                "sigma_x": float(p["sigma"][0]), "sigma_y": float(p["sigma"][1]),
-                "axis": mi.ScalarVector3f(obj.local_x)}
-    if m.type in ("absorber", "emitter"):
+                "sigma_x": float(sigma[0]), "sigma_y": float(sigma[1]), "axis": mi.ScalarVector3f(obj.local_x)}
+    if m.type == "absorber":
         return _black()
     raise ValueError(f"{obj.name}: material {m.type!r} has no Mitsuba mapping")
 
@@ -375,12 +405,11 @@ def _shapes(obj: SceneObject) -> dict:
     normals = obj.normals if obj.smooth else None
     # Mitsuba's bitmap has row 0 at v = 0; the tracer's (OBJ) texture coordinates have v up.
     uv = None if obj.uv is None else np.stack([obj.uv[:, 0], 1.0 - obj.uv[:, 1]], axis=1)
-    if obj.material.type != "emitter":
+    if obj.emission is None or obj.emission.luminance <= 0:
         return {obj.name: _mesh(obj.name, obj.vertices, obj.faces, bsdf(obj), None, normals, uv)}
-    radiance = _rgb(emitter_luminance(obj) * obj.material.params["color"])
-    emitter = {"type": "area", "radiance": radiance}
-    if not obj.material.params["two_sided"]:
-        return {obj.name: _mesh(obj.name, obj.vertices, obj.faces, _black(), emitter, normals, uv)}
+    emitter = {"type": "area", "radiance": _rgb(obj.emission.radiance)}
+    if not obj.emission.two_sided:
+        return {obj.name: _mesh(obj.name, obj.vertices, obj.faces, bsdf(obj), emitter, normals, uv)}
     tri = obj.triangles
     face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
@@ -388,8 +417,8 @@ def _shapes(obj: SceneObject) -> dict:
     faces = np.arange(3 * len(tri)).reshape(-1, 3)
     front = (tri + eps * face_n[:, None, :]).reshape(-1, 3)
     back = (tri - eps * face_n[:, None, :]).reshape(-1, 3)
-    return {obj.name: _mesh(obj.name, front, faces, _black(), emitter),
-            f"{obj.name}__back": _mesh(f"{obj.name}__back", back, faces[:, ::-1], _black(), emitter)}
+    return {obj.name: _mesh(obj.name, front, faces, bsdf(obj), emitter),
+            f"{obj.name}__back": _mesh(f"{obj.name}__back", back, faces[:, ::-1], bsdf(obj), emitter)}
 
 
 def environment(scene: Scene) -> dict | None:
@@ -444,9 +473,9 @@ def load(scene: Scene) -> mi.Scene:
 
 
 def integrator(scene: Scene, kind: str) -> mi.Integrator:
-    """Mitsuba's ``path`` (camera paths; the scene's backward.max_depth) or ``ptracer`` (particles;
-    forward.max_depth). Both count max_depth in ray segments, as the tracer does; Russian roulette is
-    switched off (rr_depth = max_depth), as the tracer's only applies below 1e-5 of a path's starting
-    weight."""
-    depth = scene.backward["max_depth"] if kind == "path" else scene.forward["max_depth"]
+    """Mitsuba's ``path`` (camera paths; the scene's methods.backward.max_depth) or ``ptracer``
+    (particles; methods.forward.max_depth). Both count max_depth in ray segments, as the tracer does;
+    Russian roulette is switched off (rr_depth = max_depth), as the tracer's only thins paths that can
+    no longer change a pixel by 1e-4 of the image's mean luminance."""
+    depth = scene.method_options("backward" if kind == "path" else "forward")["max_depth"]
     return mi.load_dict({"type": kind, "max_depth": depth, "rr_depth": depth, "hide_emitters": False})

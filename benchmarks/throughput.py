@@ -1,19 +1,20 @@
 """Rays per second of the tracer end to end against the raw embreex intersection rate, measured in
 the same run on the same geometry (the hud-direct preset unless another scene is named), on one
-process and on several.
+process and on several, with the time of every stage of the path loop.
 
     .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S] [--workers W] [--repeats R]
 
-Raw rates, one core: (1) one Embree call on 2^20 rays with random origins in the scene's bounding
-box and random directions, best of 5 (the ceiling the speed goal is stated against); (2) the very
-rays each method traces (recorded from 8 of its batches, bounce by bounce, and replayed through the
-same Embree calls, best of 5): the ceiling for that method's ray mix, which hits more geometry than
-random rays do. End to end: the forward and the backward method for S seconds each (everything:
-sampling, shading, film), on one process and on W worker processes (tracer.parallel; the time
-includes starting the workers), alternating R times (medians reported: the machine's speed drifts
-between runs). "Steady" rates leave out the first batch (worker start-up, first
-calls), as a long render sees them. Peak memory is the largest resident set of this process and of
-its workers.
+Raw rates, one core: (1) one Embree closest-hit call on 2^20 rays with random origins in the scene's
+bounding box and random directions, best of 5 (the ceiling the speed goal is stated against); (2) the
+very rays each method traces (recorded from 8 of its batches, bounce by bounce, closest-hit and shadow
+queries, and replayed through the same Embree calls, best of 5): the ceiling for that method's ray mix.
+End to end: every method variant (forward; backward with next-event estimation; backward without it,
+the paper's plain method) for S seconds, on one process and on W worker processes (tracer.parallel; the
+clock starts once every worker has built its world, as in a render, and the start-up is printed apart),
+alternating R times (medians: the machine's speed drifts between runs). "Steady" rates leave out the
+first batch. Per stage: the share of one process's wall time spent in each stage of the path loop
+(intersect, sensor, shade, shadow, film, other). Peak memory is the largest resident set of this
+process and of its workers.
 """
 
 from __future__ import annotations
@@ -35,17 +36,28 @@ from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
+from tracer.world import World  # noqa: E402
+
+#: The method variants measured: label -> (method, options that differ from the scene's).
+VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
+            "backward, no NEE": ("backward", {"next_event": False})}
+
+
+def make(world: World, label: str, seed: int):
+    method, changes = VARIANTS[label]
+    opts = dict(world.scene.method_options(method)) | changes
+    return INTEGRATORS[method](world, seed, options=opts)
 
 
 def raw_embree_rate(scene, n: int = 1 << 20, repeats: int = 5) -> float:
     objs = scene.traced_objects
-    accel = Accelerator([(o.vertices, o.faces) for o in objs])
+    accel = Accelerator(objs)
     allv = np.concatenate([o.vertices for o in objs])
     lo, hi = allv.min(axis=0), allv.max(axis=0)
     rng = make_rng(0)
     o = lo + (hi - lo) * rng.random((n, 3))
-    d = uniform_sphere(rng.random((n, 2)))
-    o32, d32 = o.astype(np.float32) - accel.center.astype(np.float32), d.astype(np.float32)
+    d = uniform_sphere(rng.random((2, n))).T
+    o32, d32 = (o - accel.center).astype(np.float32), d.astype(np.float32)
     best = 0.0
     for _ in range(repeats):
         t = time.perf_counter()
@@ -56,26 +68,33 @@ def raw_embree_rate(scene, n: int = 1 << 20, repeats: int = 5) -> float:
 
 def own_rays_rate(integrator, batches: int = 8, repeats: int = 5) -> float:
     """Raw Embree rate (rays/s, one core) on the rays ``integrator`` traces in ``batches`` batches."""
-    accel = integrator.accel
+    accel = integrator.world.accel
     recorded = []
-    trace = accel.intersect
+    intersect, occluded = accel.intersect, accel.occluded
 
-    def recording(origins, dirs, tmax=None):
-        recorded.append(((origins - accel.center).astype(np.float32), dirs.astype(np.float32)))
-        return trace(origins, dirs, tmax)
+    def rec_intersect(o, d):
+        recorded.append(("INTERSECT", *accel._rays32(o, d), None))
+        return intersect(o, d)
 
-    accel.intersect = recording
+    def rec_occluded(o, d, tmax):
+        recorded.append(("OCCLUDED", *accel._rays32(o, d), np.ascontiguousarray(np.minimum(tmax, 3e38), np.float32)))
+        return occluded(o, d, tmax)
+
+    accel.intersect, accel.occluded = rec_intersect, rec_occluded
     try:
         for k in range(batches):
             integrator.trace_batch(k)
     finally:
-        del accel.intersect
-    n = sum(len(o) for o, _ in recorded)
+        del accel.intersect, accel.occluded
+    n = sum(len(r[1]) for r in recorded)
     best = 0.0
     for _ in range(repeats):
         t = time.perf_counter()
-        for o32, d32 in recorded:
-            accel._scene.run(o32, d32, output=True)
+        for query, o32, d32, tmax in recorded:
+            if query == "INTERSECT":
+                accel._scene.run(o32, d32, output=True)
+            else:
+                accel._scene.run(o32, d32, dists=tmax, query="OCCLUDED")
         best = max(best, n / (time.perf_counter() - t))
     return best
 
@@ -86,31 +105,40 @@ def main():
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
         scene = load_scene(folder)
+        world = World(scene)
         raw = raw_embree_rate(scene)
         print(f"raw embreex intersection rate: {raw:,.0f} rays/s (one call on 2^20 random rays, best of 5)")
-        for method in ("forward", "backward"):
-            own = own_rays_rate(INTEGRATORS[method](scene, 99))
-            print(f"{method:8s} raw embreex on its own rays: {own:,.0f} rays/s")
+        for label in args.variants:
+            own = own_rays_rate(make(World(scene), label, 99))
+            print(f"{label:16s} raw embreex on its own rays: {own:,.0f} rays/s")
             # One process and W processes alternate, --repeats times, and the medians are compared:
             # this machine's speed drifts by tens of percent between runs a minute apart.
-            one, many = [], []
+            one, many, stages, startup = [], [], [], []
             for r in range(args.repeats):
-                res = INTEGRATORS[method](scene, 1 + r).render(Budget(seconds=args.seconds))
-                par = render_parallel(INTEGRATORS[method](scene, 1 + r), Budget(seconds=args.seconds), args.workers)
+                res = make(world, label, 1 + r).render(Budget(seconds=args.seconds))
+                par = render_parallel(make(world, label, 1 + r), Budget(seconds=args.seconds), args.workers)
                 one.append((res.rays_per_second, res.extra["steady_rays_per_second"]))
                 many.append((par.rays_per_second, par.extra["steady_rays_per_second"]))
-                print(f"{method:8s} run {r + 1}: one process {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
+                stages.append({k: v / res.seconds for k, v in res.stages.items()})
+                startup.append(par.extra["startup_seconds"])
+                print(f"{label:16s} run {r + 1}: one process {res.rays_per_second:,.0f} rays/s ({res.rays:,} rays in "
                       f"{res.seconds:.1f} s), {args.workers} processes {par.rays_per_second:,.0f} rays/s "
-                      f"({par.rays:,} rays in {par.seconds:.1f} s); efficiency {res.efficiency:.3g}")
+                      f"({par.rays:,} rays in {par.seconds:.1f} s, start-up {par.extra['startup_seconds']:.1f} s); "
+                      f"efficiency {res.efficiency:.3g}", flush=True)
             (rate, steady), (par_rate, par_steady) = np.median(one, axis=0), np.median(many, axis=0)
-            print(f"{method:8s} end to end (median): {rate:,.0f} rays/s = {rate / raw:.2f} of raw, {rate / own:.2f} "
+            share = {k: float(np.median([s.get(k, 0.0) for s in stages])) for k in stages[0]}
+            print(f"{label:16s} end to end (median): {rate:,.0f} rays/s = {rate / raw:.2f} of raw, {rate / own:.2f} "
                   f"of raw on its own rays")
-            print(f"{method:8s} on {args.workers} processes (median): {par_rate:,.0f} rays/s = {par_rate / rate:.2f} x "
-                  f"one process; steady (without the first batch) {par_steady / steady:.2f} x")
+            print(f"{label:16s} on {args.workers} processes (median): {par_rate:,.0f} rays/s = {par_rate / rate:.2f} x "
+                  f"one process; steady (without the first batch) {par_steady / steady:.2f} x; start-up "
+                  f"{np.median(startup):.1f} s, not in the rate")
+            print(f"{label:16s} stages (share of one process's wall time): "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in share.items()))
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         print(f"peak memory: {own:.0f} MiB (this process), {kids:.0f} MiB (largest worker)")

@@ -10,38 +10,43 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..tracer.scene import load_scene
+from ..tracer.integrators import INTEGRATORS
+from ..tracer.lights import EMISSION
+from ..tracer.optics.materials import MATERIALS
+from ..tracer.scene import LEGACY_EMITTER, load_scene
+from . import schema_ui
 from .export import M_TO_MM
 
 COLLECTION = "HUD"
 
 
-def _apply_material(obj, material, by_name):
+def _apply_aim(h, prefix: str, aim: dict | None, by_name: dict):
+    if aim is None:
+        return
+    setattr(h, f"{prefix}aim_share", aim.get("share", 0.5))
+    setattr(h, f"{prefix}aim_mode", aim.get("mode", "toward"))
+    if aim["target"] == "eye":
+        setattr(h, f"{prefix}aim", "EYE")
+    else:
+        setattr(h, f"{prefix}aim", "OBJECT")
+        setattr(h, f"{prefix}aim_object", by_name[aim["target"]])
+
+
+def _apply_object(obj, spec: dict, by_name: dict, root: Path):
+    """Set an object's HUD role, material fields and emission from its scene.json entry."""
     h = obj.hud
-    h.role = material.type
-    p = material.params
-    for key in ("reflectance", "transmittance"):
-        if key in p:
-            setattr(h, key, tuple(p[key]))
-    if material.type == "dielectric":
-        h.ior, h.ior_outside = p["ior"], p["ior_outside"]
-    if material.type == "diffuser":
-        h.sigma_deg = tuple(p["sigma_deg"])
-    if material.type == "lcd":
-        h.contrast_ratio = p["contrast_ratio"]
-    if material.type == "emitter":
-        if "luminance" in p:
-            h.emission, h.luminance = "LUMINANCE", p["luminance"]
-        else:
-            h.emission, h.flux = "FLUX", p["flux"]
-        h.color = tuple(p["color"])
-        h.two_sided = p["two_sided"]
-    if material.aim is not None:
-        h.aim_share, h.aim_mode = material.aim.share, material.aim.mode
-        if material.aim.target == "eye":
-            h.aim = "EYE"
-        else:
-            h.aim, h.aim_object = "OBJECT", by_name[material.aim.target]
+    material = dict(spec["material"])
+    emission = spec.get("emission")
+    if material["type"] == LEGACY_EMITTER:  # an absorber that emits, in the files of earlier releases
+        emission, material = {k: v for k, v in material.items() if k != "type"}, {"type": "absorber"}
+    schema = MATERIALS[material["type"]].schema
+    h.role = material["type"]
+    schema_ui.apply(h, schema.fields, material, "", schema.alternatives, root, by_name)
+    _apply_aim(h, "", material.get("aim"), by_name)
+    if emission is not None:
+        h.emits = True
+        schema_ui.apply(h, EMISSION.fields, emission, "emission_", EMISSION.alternatives, root, by_name)
+        _apply_aim(h, "emission_", emission.get("aim"), by_name)
 
 
 def build_scene(folder, context) -> list:
@@ -73,11 +78,11 @@ def build_scene(folder, context) -> list:
         created.append(obj)
         by_name[o.name] = obj
     for o in sc.objects:
-        _apply_material(by_name[o.name], o.material, by_name)
-        if o.material.type == "lcd":
-            img = bpy.data.images.load(str(Path(sc.root) / o.material.params["image_file"]), check_existing=False)
-            img.pack()
-            by_name[o.name].hud.lcd_image = img
+        _apply_object(by_name[o.name], sc.raw["objects"][o.index], by_name, Path(sc.root))
+    raw_methods = dict(sc.raw.get("methods", {}))
+    raw_methods |= {name: sc.raw[name] for name in ("forward", "backward") if name in sc.raw}
+    for name, block in raw_methods.items():
+        schema_ui.apply(scene.hud, INTEGRATORS[name].options, block, f"{name}_", (), Path(sc.root), by_name)
     _build_eye(sc.eye, scene, coll, unit)
     _build_world(sc, scene)
     return created

@@ -17,6 +17,10 @@ import numpy as np
 
 from ..presets._build import write_obj
 from ..tracer.imageio import write_exr
+from ..tracer.integrators import INTEGRATORS
+from ..tracer.lights import EMISSION
+from ..tracer.optics.materials import MATERIALS
+from . import schema_ui
 
 #: Metres to millimetres.
 M_TO_MM = 1000.0
@@ -80,41 +84,51 @@ def _save_image(image, folder: Path, stem: str) -> str:
     return rel
 
 
-def material_spec(obj, folder: Path) -> dict:
-    """The scene.json material of an object from its HUD role and parameters."""
+def _aim_spec(obj, prefix: str) -> dict | None:
     h = obj.hud
-    rgb = lambda v: [float(c) for c in v]  # noqa: E731
-    role = h.role
-    m: dict = {"type": role}
-    if role == "mirror":
-        m["reflectance"] = rgb(h.reflectance)
-    elif role == "dielectric":
-        m.update(ior=h.ior, ior_outside=h.ior_outside)
-    elif role == "coating":
-        m.update(reflectance=rgb(h.reflectance), transmittance=rgb(h.transmittance))
-    elif role == "lambertian":
-        m["reflectance"] = rgb(h.reflectance)
-    elif role == "lambertian_transmitter":
-        m.update(transmittance=rgb(h.transmittance), reflectance=rgb(h.reflectance))
-    elif role == "diffuser":
-        m.update(transmittance=rgb(h.transmittance), sigma_deg=[float(s) for s in h.sigma_deg])
-    elif role == "lcd":
-        if h.lcd_image is None:
-            raise ValueError(f"object {obj.name!r}: an LCD needs a slide image")
-        m.update(image=_save_image(h.lcd_image, folder, f"slide_{bpy.path.clean_name(obj.name)}"),
-                 image_encoding=h.lcd_encoding, transmittance=rgb(h.transmittance), contrast_ratio=h.contrast_ratio)
-    elif role == "emitter":
-        if h.emission == "LUMINANCE":
-            m["luminance"] = h.luminance
-        else:
-            m["flux"] = h.flux
-        m.update(color=rgb(h.color), two_sided=h.two_sided)
-    if role in ("lambertian", "lambertian_transmitter", "diffuser", "emitter") and h.aim != "NONE":
-        target = "eye" if h.aim == "EYE" else (h.aim_object.name if h.aim_object else None)
-        if target is None:
-            raise ValueError(f"object {obj.name!r}: aim at an object, but none is chosen")
-        m["aim"] = {"target": target, "share": h.aim_share, "mode": h.aim_mode}
+    kind = getattr(h, f"{prefix}aim")
+    if kind == "NONE":
+        return None
+    target = "eye" if kind == "EYE" else (getattr(h, f"{prefix}aim_object").name
+                                         if getattr(h, f"{prefix}aim_object") else None)
+    if target is None:
+        raise ValueError(f"object {obj.name!r}: aim at an object, but none is chosen")
+    return {"target": target, "share": getattr(h, f"{prefix}aim_share"), "mode": getattr(h, f"{prefix}aim_mode")}
+
+
+def material_spec(obj, folder: Path) -> dict:
+    """The scene.json material block of an object from its HUD role and the role's schema fields."""
+    h = obj.hud
+    schema = MATERIALS[h.role].schema
+
+    def save(image, f):
+        return _save_image(image, folder, f"{f.name}_{bpy.path.clean_name(obj.name)}")
+
+    try:
+        m = {"type": h.role} | schema_ui.export(h, schema.fields, "", schema.alternatives, save)
+    except ValueError as e:
+        raise ValueError(f"object {obj.name!r}: {e}") from None
+    aim = _aim_spec(obj, "") if schema.can_aim else None
+    if aim is not None:
+        m["aim"] = aim
     return m
+
+
+def emission_spec(obj) -> dict | None:
+    """The scene.json emission block of an object that emits, else None."""
+    h = obj.hud
+    if not h.emits:
+        return None
+    e = schema_ui.export(h, EMISSION.fields, "emission_", EMISSION.alternatives)
+    aim = _aim_spec(obj, "emission_")
+    if aim is not None:
+        e["aim"] = aim
+    return e
+
+
+def methods_spec(scene) -> dict:
+    """Every method's options from the render settings (the folder renders the same with any method)."""
+    return {name: schema_ui.export(scene.hud, cls.options, f"{name}_") for name, cls in INTEGRATORS.items()}
 
 
 def eye_spec(scene) -> dict:
@@ -174,15 +188,20 @@ def export_scene(depsgraph, folder) -> Path:
             continue
         name = obj.name
         rel = f"meshes/{bpy.path.clean_name(name)}.obj"
-        co, tri, uv = _mesh_arrays(obj, depsgraph, with_uv=obj.hud.role == "lcd")
+        co, tri, uv = _mesh_arrays(obj, depsgraph, with_uv=any(f.kind == "image" for f in
+                                                              MATERIALS[obj.hud.role].schema.fields))
         write_obj(folder / rel, co * unit_mm, tri, uv)
         entry = {"name": name, "mesh": rel, "transform": {"matrix": _matrix_mm(obj, unit_mm)},
                  "material": material_spec(obj, folder)}
         if obj.hud.smooth_normals:
             entry["smooth_normals"] = True
+        emission = emission_spec(obj)
+        if emission is not None:
+            entry["emission"] = emission
         objects.append(entry)
     data = {"format": "hud-scene", "version": 1, "name": scene.name,
             "description": f"exported from Blender {bpy.app.version_string}",
-            "eye": eye_spec(scene), "environment": environment_spec(scene, folder), "objects": objects}
+            "eye": eye_spec(scene), "environment": environment_spec(scene, folder), "objects": objects,
+            "methods": methods_spec(scene)}
     (folder / "scene.json").write_text(json.dumps(data, indent=2) + "\n")
     return folder

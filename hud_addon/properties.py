@@ -1,6 +1,7 @@
-"""Property groups: Scene.hud (render settings), Object.hud (optical role), Camera.hud (eye),
-World.hud (environment). One PointerProperty per datablock type; every physical quantity says its
-unit in its name or description."""
+"""Property groups: Scene.hud (render settings and every method's options), Object.hud (optical role,
+the material's fields, emission), Camera.hud (eye), World.hud (environment). One PointerProperty per
+datablock type. The fields of materials, of the emission block and of the methods' options come from
+the tracer's schemas (hud_addon/schema_ui.py), so a new material or option needs no change here."""
 
 import bpy
 from bpy.props import (
@@ -13,7 +14,10 @@ from bpy.props import (
 )
 
 from ..tracer.integrators import INTEGRATORS
-from ..tracer.scene import MATERIAL_FIELDS
+from ..tracer.lights import EMISSION
+from ..tracer.optics.materials import MATERIALS
+from ..tracer.schema import check_consistent
+from .schema_ui import annotations
 
 
 def _method_items(self, context):
@@ -23,79 +27,97 @@ def _method_items(self, context):
     return [(name, name.capitalize(), INTEGRATORS[name].summary) for name in names]
 
 
-ROLE_LABELS = {
-    "mirror": "Mirror", "dielectric": "Dielectric (glass)", "coating": "Coated partial reflector",
-    "absorber": "Absorber", "lambertian": "Lambertian reflector",
-    "lambertian_transmitter": "Diffuse screen (Lambertian transmitter)", "diffuser": "Gaussian diffuser",
-    "lcd": "LCD modulator", "emitter": "Emitter", "aperture": "Aperture (virtual, not traced)",
-}
 ROLE_ITEMS = [("none", "None", "Not exported to the tracer")] + [
-    (role, ROLE_LABELS.get(role, role), f"Tracer material '{role}'") for role in MATERIAL_FIELDS]
+    (name, cls.schema.label, cls.schema.description) for name, cls in MATERIALS.items()]
 
 
-class HudSceneSettings(bpy.types.PropertyGroup):
-    method: EnumProperty(name="Method", items=_method_items, description="Light-transport method")
-    budget: EnumProperty(name="Budget", items=[("SECONDS", "Seconds", "Wall-clock time"),
-                                               ("RAYS", "Rays", "Traced ray segments")], default="SECONDS")
-    seconds: FloatProperty(name="Seconds", default=10.0, min=0.01, description="Render time, s")
-    rays: IntProperty(name="Rays", default=10_000_000, min=1, description="Ray segments to trace")
-    seed: IntProperty(name="Seed", default=0, min=0)
+def _aim(prefix: str) -> dict:
+    """The paper's directed split (sec. 2) of a scattering material or of an emission."""
+    return {
+        f"{prefix}aim": EnumProperty(name="Aim", items=[("NONE", "None", "No directed sampling"),
+                                                        ("EYE", "Eye pupil", "Aim at the eye pupil"),
+                                                        ("OBJECT", "Object", "Aim at a planar object")],
+                                     default="NONE",
+                                     description="Directed sampling for the forward method (paper sec. 2)"),
+        f"{prefix}aim_object": PointerProperty(name="Aim at", type=bpy.types.Object,
+                                               description="A planar object: an aperture, a window, the LCD"),
+        f"{prefix}aim_share": FloatProperty(name="Share", default=0.5, min=0.0, max=0.99,
+                                            description="Share of the samples drawn toward the target, below 1"),
+        f"{prefix}aim_mode": EnumProperty(name="Mode", items=[("toward", "Toward", "Directions toward the target"),
+                                                              ("away", "Away",
+                                                               "As if coming from a virtual target behind")],
+                                          description="Toward the target, or away from its virtual image behind"),
+    }
 
 
-class HudObjectSettings(bpy.types.PropertyGroup):
-    role: EnumProperty(name="Optical role", items=ROLE_ITEMS, default="none")
-    smooth_normals: BoolProperty(name="Smooth normals", default=False,
-                                 description="Interpolate vertex normals (curved mirrors and lenses)")
-    reflectance: FloatVectorProperty(name="Reflectance", subtype="COLOR", size=3, min=0, max=1,
-                                     default=(0.9, 0.9, 0.9))
-    transmittance: FloatVectorProperty(name="Transmittance", subtype="COLOR", size=3, min=0, max=1,
-                                       default=(0.9, 0.9, 0.9))
-    ior: FloatProperty(name="IOR", default=1.52, min=1.0, description="Refractive index inside the mesh")
-    ior_outside: FloatProperty(name="IOR outside", default=1.0, min=1.0)
-    sigma_deg: FloatVectorProperty(name="Lobe width, deg", size=2, default=(3.0, 3.0), min=0.001, max=60.0,
-                                   description="Gaussian lobe widths along the object's local x and y, degrees")
-    lcd_image: PointerProperty(name="Slide", type=bpy.types.Image, description="LCD transmittance image")
-    lcd_encoding: EnumProperty(name="Encoding", items=[("srgb", "sRGB", ""), ("linear", "Linear", "")])
-    contrast_ratio: FloatProperty(name="Contrast ratio", default=300.0, min=1.0)
-    emission: EnumProperty(name="Emission", items=[("LUMINANCE", "Luminance", "cd/m^2"), ("FLUX", "Flux", "lm")])
-    luminance: FloatProperty(name="Luminance, cd/m²", default=1000.0, min=0.0)
-    flux: FloatProperty(name="Flux, lm", default=1.0, min=0.0)
-    color: FloatVectorProperty(name="Color", subtype="COLOR", size=3, min=0, default=(1.0, 1.0, 1.0))
-    two_sided: BoolProperty(name="Two-sided", default=False)
-    aim: EnumProperty(name="Aim", items=[("NONE", "None", "No directed sampling"),
-                                         ("EYE", "Eye pupil", "Aim at the eye pupil"),
-                                         ("OBJECT", "Object", "Aim at a planar object")], default="NONE")
-    aim_object: PointerProperty(name="Aim at", type=bpy.types.Object)
-    aim_share: FloatProperty(name="Share", default=0.5, min=0.0, max=0.99)
-    aim_mode: EnumProperty(name="Mode", items=[("toward", "Toward", "Directions toward the target"),
-                                               ("away", "Away", "As if coming from a virtual target behind")])
+def _scene_annotations() -> dict:
+    ann = {
+        "method": EnumProperty(name="Method", items=_method_items, description="Light-transport method"),
+        "budget": EnumProperty(name="Budget", items=[("SECONDS", "Seconds", "Wall-clock time"),
+                                                     ("RAYS", "Rays", "Traced ray segments")], default="SECONDS",
+                               description="Stop after a time or a number of traced ray segments"),
+        "seconds": FloatProperty(name="Seconds", default=10.0, min=0.01, description="Render time, s"),
+        "rays": IntProperty(name="Rays", default=10_000_000, min=1, description="Ray segments to trace"),
+        "seed": IntProperty(name="Seed", default=0, min=0, description="Seed of the random streams"),
+    }
+    for name, cls in INTEGRATORS.items():
+        annotations(cls.options, f"{name}_", seen=ann)
+    return ann
+
+
+def _object_annotations() -> dict:
+    check_consistent([cls.schema for cls in MATERIALS.values()])
+    ann = {
+        "role": EnumProperty(name="Optical role", items=ROLE_ITEMS, default="none",
+                             description="The tracer material of this object"),
+        "smooth_normals": BoolProperty(name="Smooth normals", default=False,
+                                       description="Interpolate vertex normals (curved mirrors and lenses)"),
+        "emits": BoolProperty(name="Emits light", default=False,
+                              description="The object is also a Lambertian light source (any material can emit)"),
+    }
+    for cls in MATERIALS.values():
+        annotations(cls.schema.fields, "", cls.schema.alternatives, ann)
+    ann |= _aim("")
+    annotations(EMISSION.fields, "emission_", EMISSION.alternatives, ann)
+    ann |= _aim("emission_")
+    return ann
+
+
+HudSceneSettings = type("HudSceneSettings", (bpy.types.PropertyGroup,), {"__annotations__": _scene_annotations()})
+HudObjectSettings = type("HudObjectSettings", (bpy.types.PropertyGroup,), {"__annotations__": _object_annotations()})
 
 
 class HudCameraSettings(bpy.types.PropertyGroup):
     pupil: EnumProperty(name="Pupil", items=[("FIXED", "Fixed", "A given diameter"),
                                              ("AUTO", "From adaptation", "Watson & Yellott 2012 from the "
-                                              "adaptation luminance")], default="FIXED")
-    pupil_diameter_mm: FloatProperty(name="Pupil, mm", default=4.0, min=0.01)
+                                              "adaptation luminance")], default="FIXED",
+                        description="A fixed pupil or one that follows the adaptation luminance")
+    pupil_diameter_mm: FloatProperty(name="Pupil, mm", default=4.0, min=0.01, description="Pupil diameter, mm")
     adaptation_luminance: FloatProperty(
         name="Adaptation, cd/m²", default=0.0, min=0.0,
         description="Luminance the eye is adapted to, cd/m^2; 0: the environment's mean")
-    observer_age: FloatProperty(name="Age, years", default=30.0, min=1.0, max=120.0)
-    focal_length_mm: FloatProperty(name="Eye focal length, mm", default=16.67, min=0.1)
+    observer_age: FloatProperty(name="Age, years", default=30.0, min=1.0, max=120.0,
+                                description="Observer's age (Watson & Yellott's age term), years")
+    focal_length_mm: FloatProperty(name="Eye focal length, mm", default=16.67, min=0.1,
+                                   description="Focal length of the thin-lens eye, mm (16.67: Emsley's reduced eye)")
     accommodation_distance_mm: FloatProperty(name="Accommodation, mm", default=2500.0, min=0.0,
                                              description="Focus distance, mm; 0 means infinity")
 
 
 class HudWorldSettings(bpy.types.PropertyGroup):
-    kind: EnumProperty(name="Environment", items=[("none", "None", ""), ("uniform", "Uniform", ""),
-                                                  ("hdri", "HDRI panorama", "")], default="none")
-    luminance: FloatProperty(name="Luminance, cd/m²", default=100.0, min=0.0)
-    color: FloatVectorProperty(name="Color", subtype="COLOR", size=3, min=0, default=(1.0, 1.0, 1.0))
-    image: PointerProperty(name="Panorama", type=bpy.types.Image)
+    kind: EnumProperty(name="Environment", items=[("none", "None", "Black"), ("uniform", "Uniform", "One luminance"),
+                                                  ("hdri", "HDRI panorama", "An equirectangular panorama")],
+                       default="none", description="What rays that leave the scene see")
+    luminance: FloatProperty(name="Luminance, cd/m²", default=100.0, min=0.0, description="Uniform luminance, cd/m^2")
+    color: FloatVectorProperty(name="Color", subtype="COLOR", size=3, min=0, default=(1.0, 1.0, 1.0),
+                               description="Linear Rec.709 colour, scaled to the luminance")
+    image: PointerProperty(name="Panorama", type=bpy.types.Image, description="Equirectangular HDR panorama")
     calibration: EnumProperty(name="Calibration", items=[("scale", "Scale", "Multiply the image by a factor"),
                                                          ("mean", "Mean", "Mean luminance, cd/m^2"),
-                                                         ("max", "Max", "Maximum luminance, cd/m^2")], default="mean")
-    value: FloatProperty(name="Value", default=1000.0, min=1e-9)
-    rotation_deg: FloatProperty(name="Rotation, deg", default=0.0)
+                                                         ("max", "Max", "Maximum luminance, cd/m^2")], default="mean",
+                              description="How the panorama's values become cd/m^2")
+    value: FloatProperty(name="Value", default=1000.0, min=1e-9, description="The factor, or the target cd/m^2")
+    rotation_deg: FloatProperty(name="Rotation, deg", default=0.0, description="Turn about +z, degrees")
 
 
 CLASSES = (HudSceneSettings, HudObjectSettings, HudCameraSettings, HudWorldSettings)
@@ -115,5 +137,3 @@ def unregister():
         del owner.hud
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
-
-

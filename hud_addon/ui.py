@@ -2,6 +2,11 @@
 
 import bpy
 
+from ..tracer.integrators import INTEGRATORS
+from ..tracer.lights import EMISSION
+from ..tracer.optics.materials import MATERIALS
+from . import schema_ui
+
 ENGINE = "HUD_TRACER"
 
 
@@ -26,6 +31,10 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         col.prop(s, "budget")
         col.prop(s, "seconds" if s.budget == "SECONDS" else "rays")
         col.prop(s, "seed")
+        if s.method in INTEGRATORS:
+            box = col.box()
+            box.label(text=f"{s.method.capitalize()} options")
+            schema_ui.draw(box, s, INTEGRATORS[s.method].options, f"{s.method}_")
         r = context.scene.render
         col.label(text=f"Retina: {r.resolution_x * r.resolution_percentage // 100} x "
                        f"{r.resolution_y * r.resolution_percentage // 100} px (Output properties)")
@@ -47,24 +56,27 @@ class HUD_PT_object(_HudPanel, bpy.types.Panel):
         h = context.object.hud
         col = self.layout.column()
         col.prop(h, "role")
-        role = h.role
-        fields = {"mirror": ["reflectance"], "dielectric": ["ior", "ior_outside"],
-                  "coating": ["reflectance", "transmittance"], "lambertian": ["reflectance"],
-                  "lambertian_transmitter": ["transmittance", "reflectance"],
-                  "diffuser": ["transmittance", "sigma_deg"],
-                  "lcd": ["lcd_image", "lcd_encoding", "transmittance", "contrast_ratio"],
-                  "emitter": ["emission", "luminance" if h.emission == "LUMINANCE" else "flux", "color", "two_sided"]}
-        for name in fields.get(role, []):
-            col.prop(h, name)
-        if role in ("lambertian", "lambertian_transmitter", "diffuser", "emitter"):
-            col.prop(h, "aim")
-            if h.aim != "NONE":
-                if h.aim == "OBJECT":
-                    col.prop(h, "aim_object")
-                col.prop(h, "aim_share")
-                col.prop(h, "aim_mode")
-        if role != "none":
-            col.prop(h, "smooth_normals")
+        if h.role == "none":
+            return
+        schema = MATERIALS[h.role].schema
+        schema_ui.draw(col, h, schema.fields, "", schema.alternatives)
+        if schema.can_aim:
+            _draw_aim(col, h, "")
+        col.prop(h, "smooth_normals")
+        col.prop(h, "emits")
+        if h.emits:
+            box = col.box()
+            schema_ui.draw(box, h, EMISSION.fields, "emission_", EMISSION.alternatives)
+            _draw_aim(box, h, "emission_")
+
+
+def _draw_aim(col, h, prefix: str):
+    col.prop(h, f"{prefix}aim")
+    if getattr(h, f"{prefix}aim") != "NONE":
+        if getattr(h, f"{prefix}aim") == "OBJECT":
+            col.prop(h, f"{prefix}aim_object")
+        col.prop(h, f"{prefix}aim_share")
+        col.prop(h, f"{prefix}aim_mode")
 
 
 class HUD_PT_eye(_HudPanel, bpy.types.Panel):

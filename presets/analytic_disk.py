@@ -33,8 +33,8 @@ def write(folder, resolution=(15, 15)) -> Path:
     sb = SceneBuilder(Path(folder), NAME, SUMMARY)
     sb.add("floor", rectangle(4000, 4000), {"type": "lambertian", "reflectance": RHO,
                                             "aim": {"target": "eye", "share": 0.5}})
-    sb.add("disk", disk(RADIUS, 256), {"type": "emitter", "luminance": L},
-           frame_matrix([0, 0, HEIGHT], [1, 0, 0], [0, 0, -1]))
+    sb.add("disk", disk(RADIUS, 256), {"type": "absorber"}, frame_matrix([0, 0, HEIGHT], [1, 0, 0], [0, 0, -1]),
+           emission={"luminance": L})
     # The eye looks at the foot (origin) from 50 deg elevation, 400 mm away, beside the disk.
     el = math.radians(50)
     pos = np.array([0.0, -400 * math.cos(el), 400 * math.sin(el)])

@@ -17,8 +17,8 @@ L0 = 100.0  # cd/m^2
 def write(folder, pupil_mm: float = 4.0, accommodation_mm: float = 500.0, fov_deg=(60.0, 40.0),
           resolution=(48, 32)) -> Path:
     sb = SceneBuilder(Path(folder), NAME, SUMMARY)
-    sb.add("surround", sphere(1000.0, subdivisions=4, inward=True),
-           {"type": "emitter", "luminance": L0, "aim": {"target": "eye", "share": 0.95}})
+    sb.add("surround", sphere(1000.0, subdivisions=4, inward=True), {"type": "absorber"},
+           emission={"luminance": L0, "aim": {"target": "eye", "share": 0.95}})
     return sb.write(eye={"position": [0, 0, 0], "gaze": [0, 1, 0], "up": [0, 0, 1],
                          "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67,
                          "accommodation_distance_mm": accommodation_mm,

@@ -32,9 +32,8 @@ def write(folder, pupil_mm: float = 4.0, resolution=(64, 48)) -> Path:
     image_normal = np.array([0.0, 0.0, -1.0])  # the mirrored gaze (+y) becomes -z
     sb.add("pupil_image", disk(pupil_mm / 2, 64), {"type": "aperture"},
            frame_matrix(image, [1, 0, 0], image_normal))
-    sb.add("panel", rectangle(120, 120), {"type": "emitter", "luminance": L,
-                                          "aim": {"target": "pupil_image", "share": 0.9}},
-           frame_matrix(p_center, [1, 0, 0], [0, 0, 1]))
+    sb.add("panel", rectangle(120, 120), {"type": "absorber"}, frame_matrix(p_center, [1, 0, 0], [0, 0, 1]),
+           emission={"luminance": L, "aim": {"target": "pupil_image", "share": 0.9}})
     return sb.write(eye={"position": eye.tolist(), "gaze": [0, 1, 0], "up": [0, 0, 1],
                          "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67,
                          "accommodation_distance_mm": 600.0,

@@ -166,9 +166,8 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
             offset = ((col - (LED_GRID[0] - 1) / 2) * LED_PITCH[0] * x_axis
                       + (row - (LED_GRID[1] - 1) / 2) * LED_PITCH[1] * across)
             lv, lf, _ = rectangle(0.2, 0.2)
-            sb.add(f"led_{k}", (lv, lf), {"type": "emitter", "luminance": LED_LUMINANCE,
-                                          "aim": {"target": "scatterer", "share": 0.95}},
-                   frame_matrix(d["led"] + offset, x_axis, -r2))
+            sb.add(f"led_{k}", (lv, lf), {"type": "absorber"}, frame_matrix(d["led"] + offset, x_axis, -r2),
+                   emission={"luminance": LED_LUMINANCE, "aim": {"target": "scatterer", "share": 0.95}})
             k += 1
     # Housing below the LED so that nothing escapes backward into the view.
     hv, hf, _ = rectangle(60.0, 40.0)
@@ -178,6 +177,5 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
         eye={"position": eye.tolist(), "gaze": d["gaze"].tolist(), "up": [0.0, 0.0, 1.0],
              "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67, "accommodation_distance_mm": VID,
              "resolution": list(resolution), "fov_deg": list(VIEW_DEG)},
-        forward={"max_depth": 24},
-        backward={"max_depth": 24},
+        methods={"forward": {"max_depth": 24}, "backward": {"max_depth": 24}},
     )

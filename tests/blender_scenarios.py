@@ -78,8 +78,10 @@ def scenario_roundtrip(out):
     bpy.ops.mesh.primitive_plane_add(size=0.01, location=(0.0, 0.8, 0.0))
     led = bpy.context.object
     led.name = "led"
-    led.hud.role, led.hud.emission, led.hud.luminance = "emitter", "LUMINANCE", 1234.0
-    led.hud.aim, led.hud.aim_object, led.hud.aim_share, led.hud.aim_mode = "OBJECT", mirror, 0.7, "toward"
+    led.hud.role, led.hud.emits, led.hud.emission_by, led.hud.emission_luminance = "absorber", True, "luminance", 1234.0
+    h = led.hud
+    h.emission_aim, h.emission_aim_object, h.emission_aim_share, h.emission_aim_mode = "OBJECT", mirror, 0.7, "toward"
+    scene.hud.backward_max_depth, scene.hud.backward_next_event = 17, False  # method options are exported
     cam = scene.camera
     cam.location = (0.0, -1.0, 0.1)
     cam.data.hud.pupil_diameter_mm, cam.data.hud.accommodation_distance_mm = 3.5, 2000.0
@@ -184,7 +186,7 @@ def scenario_no_light():
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     bpy.ops.hud.add_preset(preset="analytic-mirror")
     scene = bpy.context.scene
-    bpy.data.objects["panel"].hud.luminance = 0.0
+    bpy.data.objects["panel"].hud.emission_luminance = 0.0
     scene.hud.method, scene.hud.budget, scene.hud.rays = "backward", "RAYS", 200_000
     stub = StubEngine(stop_after=10**9)
     figures = sys.modules[f"{module}.hud_addon.engine"].render_final(stub, bpy.context.evaluated_depsgraph_get())

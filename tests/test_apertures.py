@@ -17,12 +17,12 @@ def _target():
 
 def test_mesh_target_pdf_matches_its_sampler_exactly():
     target, _ = _target()
-    origins = make_rng(1).normal(0, 20, (5000, 3))
-    d, pdf = target.sample(origins, make_rng(2).random((5000, 3)))
+    origins = make_rng(1).normal(0, 20, (3, 5000))
+    d, pdf = target.sample(origins, make_rng(2).random((3, 5000)))
     np.testing.assert_allclose(target.pdf(origins, d), pdf, rtol=1e-6)
     # Solid-angle density times dOmega/dA gives the uniform area density 1/A.
     hit_t = target._accel.intersect(origins, d).t
-    cos = np.abs(d @ target.normal)
+    cos = np.abs(target.normal[:, 0] @ d)
     np.testing.assert_allclose(pdf * cos / hit_t**2, 1 / target.area, rtol=1e-6)
     # Directions that miss the aperture have zero density.
     assert np.all(target.pdf(origins, -d) == 0)
@@ -34,7 +34,7 @@ def test_mesh_target_directions_chi2():
     target, m = _target()
     origin = np.zeros((1, 3))
     ex, ey, c = m[:3, 0] * 30.0, m[:3, 1] * 10.0, m[:3, 3]  # rectangle edges and centre
-    normal = target.normal
+    normal = target.normal[:, 0]
 
     def to_st(d):
         t = ((c - origin) @ normal) / (d @ normal)
@@ -42,14 +42,14 @@ def test_mesh_target_directions_chi2():
         return np.stack([p @ ex / (ex @ ex), p @ ey / (ey @ ey)], axis=1)
 
     def sample(n, rng):
-        d, _ = target.sample(np.repeat(origin, n, 0), rng.random((n, 3)))
-        return to_st(d), np.ones(n, bool)
+        d, _ = target.sample(np.repeat(origin.T, n, 1), rng.random((3, n)))
+        return to_st(d.T), np.ones(n, bool)
 
     def density(s, t):
         p = c + (s[:, None] - 0.5) * ex + (t[:, None] - 0.5) * ey - origin
         dist = np.linalg.norm(p, axis=1)
         d = p / dist[:, None]
-        return target.pdf(np.repeat(origin, len(s), 0), d) * np.abs(d @ normal) * target.area / dist**2
+        return target.pdf(np.repeat(origin.T, len(s), 1), d.T) * np.abs(d @ normal) * target.area / dist**2
 
     test = ChiSquareTest(((0.0, 1.0), (0.0, 1.0)), (30, 10), sample, density, sample_count=300_000, seed=3)
     ok, msg = test.run()

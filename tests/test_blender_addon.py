@@ -86,9 +86,13 @@ def test_export_round_trip(tmp_path):
     np.testing.assert_allclose(np.array(objs["glass"]["transform"]["matrix"])[:3, 3], expected["glass_location_mm"],
                                atol=1e-4)
     assert objs["glass"]["material"]["ior"] == pytest.approx(1.6)
-    led = objs["led"]["material"]
+    assert objs["led"]["material"] == {"type": "absorber"}
+    led = objs["led"]["emission"]
     assert led["luminance"] == pytest.approx(1234.0) and led["aim"] == {"target": "mirror", "share": pytest.approx(0.7),
                                                                          "mode": "toward"}
+    assert "flux" not in led
+    assert data["methods"]["backward"]["max_depth"] == 17 and data["methods"]["backward"]["next_event"] is False
+    assert "exit_pupil" not in data["methods"]["backward"]
     eye = data["eye"]
     np.testing.assert_allclose(eye["position"], expected["camera_location_mm"], atol=1e-4)
     np.testing.assert_allclose(eye["gaze"], expected["camera_gaze"], atol=1e-6)
@@ -107,6 +111,7 @@ def test_export_round_trip(tmp_path):
     from tracer.scene import load_scene
 
     sc = load_scene(tmp_path / "scene")
+    assert sc.method_options("backward")["max_depth"] == 17 and sc.object("led").emission.luminance == 1234.0
     np.testing.assert_allclose(sc.object("mirror").vertices.mean(axis=0), expected["mirror_location_mm"], atol=1e-3)
     assert sc.object("mirror").area_mm2 == pytest.approx(200.0 * 200.0, rel=1e-6)
     assert sc.environment.mean_luminance == pytest.approx(500.0)

@@ -66,7 +66,7 @@ def test_same_seed_same_image_and_seeds_differ_by_their_variance(preset):
 
 def test_no_light_is_reported_not_silent(tmp_path, preset):
     folder = preset("analytic-mirror")
-    edit_json(folder, lambda d: d["objects"][2]["material"].update(luminance=0.0))
+    edit_json(folder, lambda d: d["objects"][2]["emission"].update(luminance=0.0))
     out = tmp_path / "o"
     res = hud_trace("render", folder, "--method", "backward", "--rays", 200_000, "--out", out, "--quiet")
     assert res.returncode == 3
@@ -83,8 +83,8 @@ BAD = {
                      "objects[0].mesh"),
     "missing_texture": (lambda p: edit_json(p, lambda d: d["objects"][2]["material"].update(image="textures/nope.png")),
                         "objects[2].material.image"),
-    "negative_luminance": (lambda p: edit_json(p, lambda d: d["objects"][-2]["material"].update(luminance=-5)),
-                           "material.luminance"),
+    "negative_luminance": (lambda p: edit_json(p, lambda d: d["objects"][-2]["emission"].update(luminance=-5)),
+                           "emission.luminance"),
     "zero_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=0)), "eye.pupil_diameter_mm"),
     "negative_pupil": (lambda p: edit_json(p, lambda d: d["eye"].update(pupil_diameter_mm=-4)),
                        "eye.pupil_diameter_mm"),

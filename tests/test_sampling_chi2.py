@@ -5,7 +5,8 @@ whole domain rectangle, so that Gauss-Legendre quadrature gives accurate expecte
 discontinuous density, such as the indicator of a disk in Cartesian coordinates, would not):
 (phi, cos theta) on the sphere (d omega = d phi d cos theta), direction cosines for narrow
 lobes, equal-area polar coordinates (phi, r^2) on disks, and vertex-polar coordinates (s, w)
-on triangles (s = 1 - b0, w = b2 / (b1 + b2), area element 2 A s ds dw).
+on triangles (s = 1 - b0, w = b2 / (b1 + b2), area element 2 A s ds dw). The tracer's routines
+take and return (k, n) planes; the harness histograms (n, 2) rows.
 """
 
 from __future__ import annotations
@@ -73,19 +74,19 @@ def constant(value: float):
 
 
 def sphere_coords(d: np.ndarray) -> np.ndarray:
-    """(phi in [0, 2 pi), cos theta) of unit directions (n, 3)."""
-    return np.stack([np.arctan2(d[:, 1], d[:, 0]) % TWO_PI, d[:, 2]], axis=-1)
+    """(phi in [0, 2 pi), cos theta), (n, 2) rows, of unit directions (3, n)."""
+    return np.stack([np.arctan2(d[1], d[0]) % TWO_PI, d[2]], axis=-1)
 
 
 def sphere_direction(phi: np.ndarray, cos_theta: np.ndarray) -> np.ndarray:
-    """Unit directions (k, 3) from (phi, cos theta)."""
+    """Unit directions (3, k) from (phi, cos theta)."""
     sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta**2))
-    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=-1)
+    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta])
 
 
 def lift(beta_x: np.ndarray, beta_y: np.ndarray) -> np.ndarray:
-    """Upper-hemisphere unit directions (k, 3) with direction cosines (beta_x, beta_y)."""
-    return np.stack([beta_x, beta_y, np.sqrt(1.0 - beta_x**2 - beta_y**2)], axis=-1)
+    """Upper-hemisphere unit directions (3, k) with direction cosines (beta_x, beta_y)."""
+    return np.stack([beta_x, beta_y, np.sqrt(1.0 - beta_x**2 - beta_y**2)])
 
 
 def vertex_polar(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -106,7 +107,7 @@ def vertex_polar(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> 
 
 
 def lobe_pdf(d: np.ndarray, beta0: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    return smp.gaussian_lobe_pdf(d, np.broadcast_to(beta0, (len(d), 2)), sigma)
+    return smp.gaussian_lobe_pdf(d, np.broadcast_to(np.asarray(beta0)[:, None], (2, d.shape[1])), sigma)
 
 
 def wide_lobe_pdf(phi: np.ndarray, cos_theta: np.ndarray) -> np.ndarray:
@@ -117,13 +118,13 @@ def lobe_test(beta0, sigma_sampled, sigma_tested, seed) -> ChiSquareTest:
     """Narrow lobe in direction cosines over beta0 +- 5 sigma, density pdf / d_z."""
 
     def sample(n, rng):
-        beta0_n = np.broadcast_to(beta0, (n, 2))
-        d, valid = smp.gaussian_lobe(rng.random((n, 2)), beta0_n, sigma_sampled)
-        return d[:, :2], valid
+        beta0_n = np.broadcast_to(np.asarray(beta0)[:, None], (2, n))
+        d, valid = smp.gaussian_lobe(rng.random((2, n)), beta0_n, sigma_sampled)
+        return d[:2].T, valid
 
     def density(beta_x, beta_y):
         d = lift(beta_x, beta_y)
-        return lobe_pdf(d, beta0, sigma_tested) / d[:, 2]
+        return lobe_pdf(d, beta0, sigma_tested) / d[2]
 
     bounds = tuple((c - 5.0 * s, c + 5.0 * s) for c, s in zip(beta0, sigma_tested, strict=True))
     return ChiSquareTest(bounds, (64, 64), sample, density, SAMPLES, seed=seed)
@@ -170,7 +171,7 @@ def test_gamma_q_edges():
 
 def test_harness_rejects_cosine_samples_against_uniform_hemisphere():
     def sample(n, rng):
-        return all_valid(sphere_coords(smp.cosine_hemisphere(rng.random((n, 2)))))
+        return all_valid(sphere_coords(smp.cosine_hemisphere(rng.random((2, n)))))
 
     check_rejected(ChiSquareTest(HEMISPHERE, (64, 32), sample, constant(1 / TWO_PI), seed=11))
 
@@ -183,7 +184,7 @@ def test_harness_rejects_samples_outside_support():
     test = ChiSquareTest(
         ((0.0, 1.0), (0.0, 1.0)),
         (8, 8),
-        lambda n, rng: all_valid(rng.random((n, 2))),
+        lambda n, rng: all_valid(rng.random((n, 2))),  # the harness's own rows
         lambda x, y: np.where(x < 0.5, 2.0, 0.0),
         sample_count=10_000,
     )
@@ -198,16 +199,16 @@ def test_harness_rejects_samples_outside_support():
 def test_chi2_uniform_disk_concentric():
     # In (phi, r^2) the uniform density 1/pi per unit area is 1/(2 pi).
     def sample(n, rng):
-        p = smp.uniform_disk_concentric(rng.random((n, 2)))
-        phi = np.arctan2(p[:, 1], p[:, 0]) % TWO_PI
-        return all_valid(np.stack([phi, np.sum(p * p, axis=-1)], axis=-1))
+        p = smp.uniform_disk_concentric(rng.random((2, n)))
+        phi = np.arctan2(p[1], p[0]) % TWO_PI
+        return all_valid(np.stack([phi, p[0] * p[0] + p[1] * p[1]], axis=-1))
 
     check(ChiSquareTest(POLAR_DISK, (64, 32), sample, constant(1 / TWO_PI), seed=1))
 
 
 def test_chi2_cosine_hemisphere():
     def sample(n, rng):
-        return all_valid(sphere_coords(smp.cosine_hemisphere(rng.random((n, 2)))))
+        return all_valid(sphere_coords(smp.cosine_hemisphere(rng.random((2, n)))))
 
     def density(phi, cos_theta):
         return smp.cosine_hemisphere_pdf(sphere_direction(phi, cos_theta))
@@ -217,7 +218,7 @@ def test_chi2_cosine_hemisphere():
 
 def test_chi2_uniform_sphere():
     def sample(n, rng):
-        return all_valid(sphere_coords(smp.uniform_sphere(rng.random((n, 2)))))
+        return all_valid(sphere_coords(smp.uniform_sphere(rng.random((2, n)))))
 
     check(ChiSquareTest(SPHERE, (64, 64), sample, constant(1 / (4 * np.pi)), seed=3))
 
@@ -226,8 +227,8 @@ def test_chi2_uniform_triangle_skewed():
     a, b, c = np.array([0.0, 0.0]), np.array([5.0, 0.4]), np.array([6.5, 1.2])
 
     def sample(n, rng):
-        b12 = smp.uniform_triangle(rng.random((n, 2)))
-        p = a + b12[:, 0:1] * (b - a) + b12[:, 1:2] * (c - a)
+        b12 = smp.uniform_triangle(rng.random((2, n)))
+        p = a + b12[0][:, None] * (b - a) + b12[1][:, None] * (c - a)
         return all_valid(vertex_polar(p, a, b, c))
 
     check(ChiSquareTest(((0.0, 1.0), (0.0, 1.0)), (32, 32), sample, lambda s, w: 2 * s, seed=4))
@@ -247,8 +248,8 @@ def test_chi2_gaussian_lobe_wide_truncated():
     # cell, whose expected count n (1 - integral of the pdf over the hemisphere) tests the
     # absorbed mass.
     def sample(n, rng):
-        beta0_n = np.broadcast_to(WIDE_BETA0, (n, 2))
-        d, valid = smp.gaussian_lobe(rng.random((n, 2)), beta0_n, WIDE_SIGMA)
+        beta0_n = np.broadcast_to(WIDE_BETA0[:, None], (2, n))
+        d, valid = smp.gaussian_lobe(rng.random((2, n)), beta0_n, WIDE_SIGMA)
         return sphere_coords(d), valid
 
     check(ChiSquareTest(HEMISPHERE, (64, 32), sample, wide_lobe_pdf, seed=6))
@@ -257,12 +258,12 @@ def test_chi2_gaussian_lobe_wide_truncated():
 def test_chi2_sample_disk_aperture():
     # Coordinates: the hit point on the disk in its own frame, polar (phi, s = (r/R)^2).
     center, normal, r = APERTURE["center"], APERTURE["normal"], APERTURE["radius"]
-    t, b, _ = (e[0] for e in smp.frame_from_normal(normal[None, :]))
+    t, b, _ = (e[:, 0] for e in smp.frame_from_normal(normal[:, None]))
 
     def sample(n, rng):
-        origins = np.broadcast_to(ORIGIN, (n, 3))
-        d, dist, pdf = smp.sample_disk_aperture(origins, **APERTURE, u=rng.random((n, 2)))
-        offset = origins + dist[:, None] * d - center
+        origins = np.broadcast_to(ORIGIN[:, None], (3, n))
+        d, dist, pdf = smp.sample_disk_aperture(origins, **APERTURE, u=rng.random((2, n)))
+        offset = (origins + dist * d).T - center
         x, y = offset @ t / r, offset @ b / r
         return np.stack([np.arctan2(y, x) % TWO_PI, x * x + y * y], axis=-1), pdf > 0.0
 
@@ -273,7 +274,7 @@ def test_chi2_sample_disk_aperture():
         v = center + (rho * np.cos(phi))[:, None] * t + (rho * np.sin(phi))[:, None] * b - ORIGIN
         dist = np.linalg.norm(v, axis=-1)
         d = v / dist[:, None]
-        pdf = smp.disk_aperture_pdf(np.broadcast_to(ORIGIN, d.shape), d, **APERTURE)
+        pdf = smp.disk_aperture_pdf(np.broadcast_to(ORIGIN[:, None], d.T.shape), d.T, **APERTURE)
         return pdf * np.abs(d @ normal) / dist**2 * (0.5 * r * r)
 
     check(ChiSquareTest(POLAR_DISK, (64, 32), sample, density, seed=7))
@@ -284,9 +285,9 @@ def test_chi2_sample_triangles():
     areas = smp.triangle_areas(MESH)
 
     def sample(n, rng):
-        points, tri, _ = smp.sample_triangles(MESH, rng.random((n, 3)))
+        points, tri = smp.sample_triangles(MESH, rng.random((3, n)))
         v = MESH[tri]
-        s, w = vertex_polar(points, v[:, 0], v[:, 1], v[:, 2]).T
+        s, w = vertex_polar(points.T, v[:, 0], v[:, 1], v[:, 2]).T
         return all_valid(np.stack([tri + s, w], axis=-1))
 
     def density(x, w):
@@ -322,12 +323,13 @@ def test_make_rng_streams():
 
 
 def test_uniform_disk_concentric_edges():
-    u = np.array([[0.5, 0.5], [0.0, 0.0], [0.0, 0.5], [0.5, 0.0]])
-    p = smp.uniform_disk_concentric(u)
+    u = np.array([[0.5, 0.5], [0.0, 0.0], [0.0, 0.5], [0.5, 0.0]]).T
+    p = smp.uniform_disk_concentric(u).T
     np.testing.assert_array_equal(p[0], [0.0, 0.0])
-    np.testing.assert_allclose(np.linalg.norm(p[1:], axis=-1), 1.0, rtol=1e-15)
-    p = smp.uniform_disk_concentric(smp.make_rng(0).random((10_000, 2)))
-    assert np.all(np.linalg.norm(p, axis=-1) <= 1.0)
+    # The warp's angles are float32 (tracer.sampling): radii of 1 to float32 precision.
+    np.testing.assert_allclose(np.linalg.norm(p[1:], axis=-1), 1.0, rtol=1e-7)
+    p = smp.uniform_disk_concentric(smp.make_rng(0).random((2, 10_000)))
+    assert np.all(np.linalg.norm(p, axis=0) <= 1.0 + 1e-7)
 
 
 def awkward_normals() -> np.ndarray:
@@ -354,9 +356,15 @@ def assert_orthonormal_right_handed(t, b, n):
     np.testing.assert_allclose(np.cross(t, b), n, atol=1e-12)
 
 
+def frames(n: np.ndarray, hint=None):
+    """frame_from_normal on rows (k, 3), returning rows."""
+    h = None if hint is None else (np.asarray(hint) if np.ndim(hint) == 1 else np.asarray(hint).T)
+    return tuple(e.T for e in smp.frame_from_normal(n.T, h))
+
+
 def test_frame_from_normal_is_orthonormal_right_handed():
     n = awkward_normals()
-    t, b, n_out = smp.frame_from_normal(n)
+    t, b, n_out = frames(n)
     np.testing.assert_allclose(n_out, n, atol=1e-15)
     assert_orthonormal_right_handed(t, b, n_out)
 
@@ -364,7 +372,7 @@ def test_frame_from_normal_is_orthonormal_right_handed():
 def test_frame_from_normal_with_hint():
     n = awkward_normals()
     hint = np.array([1.0, 0.0, 0.0])
-    t, b, n_out = smp.frame_from_normal(n, hint)
+    t, b, n_out = frames(n, hint)
     assert_orthonormal_right_handed(t, b, n_out)
     perp = hint - (n @ hint)[:, None] * n
     usable = np.linalg.norm(perp, axis=-1) > 1e-3
@@ -372,22 +380,22 @@ def test_frame_from_normal_with_hint():
     expected = perp[usable] / np.linalg.norm(perp[usable], axis=-1, keepdims=True)
     np.testing.assert_allclose(t[usable], expected, atol=1e-12)
     # A hint parallel to n gives the hint-free frame.
-    t_duff, b_duff, _ = smp.frame_from_normal(n[~usable])
+    t_duff, b_duff, _ = frames(n[~usable])
     np.testing.assert_array_equal(t[~usable], t_duff)
     np.testing.assert_array_equal(b[~usable], b_duff)
-    # A per-normal hint of shape (n, 3), of any length, gives the same frames.
-    t2, b2, _ = smp.frame_from_normal(n, np.broadcast_to(2.0 * hint, n.shape))
+    # A per-normal hint of shape (3, n), of any length, gives the same frames.
+    t2, b2, _ = frames(n, np.broadcast_to(2.0 * hint, n.shape))
     np.testing.assert_allclose(t2, t, atol=1e-15)
     np.testing.assert_allclose(b2, b, atol=1e-15)
 
 
 def test_to_local_to_world_round_trip():
-    t, b, n = smp.frame_from_normal(awkward_normals())
-    v = smp.make_rng(2).normal(size=(len(n), 3))
+    t, b, n = smp.frame_from_normal(awkward_normals().T)
+    v = smp.make_rng(2).normal(size=(3, n.shape[1]))
     local = smp.to_local(v, t, b, n)
     np.testing.assert_allclose(smp.to_world(local, t, b, n), v, atol=1e-12)
-    np.testing.assert_allclose(local[:, 2], np.sum(v * n, axis=-1), atol=1e-12)
-    np.testing.assert_allclose(smp.to_local(n, t, b, n), [[0.0, 0.0, 1.0]] * len(n), atol=1e-12)
+    np.testing.assert_allclose(local[2], np.sum(v * n, axis=0), atol=1e-12)
+    np.testing.assert_allclose(smp.to_local(n, t, b, n).T, [[0.0, 0.0, 1.0]] * n.shape[1], atol=1e-12)
 
 
 def test_cosine_hemisphere_pdf_integrates_to_one():
@@ -402,7 +410,7 @@ def test_gaussian_lobe_pdf_integrates_to_valid_fraction():
     # Narrow lobe, over direction cosines with d omega = d beta / d_z: the mass is 1.
     def narrow(beta_x, beta_y):
         d = lift(beta_x, beta_y)
-        return lobe_pdf(d, NARROW_BETA0, NARROW_SIGMA) / d[:, 2]
+        return lobe_pdf(d, NARROW_BETA0, NARROW_SIGMA) / d[2]
 
     bounds = tuple((c - 8.0 * s, c + 8.0 * s) for c, s in zip(NARROW_BETA0, NARROW_SIGMA, strict=True))
     assert gauss_legendre_2d(narrow, bounds, (16, 16)) == pytest.approx(1.0, abs=1e-10)
@@ -423,25 +431,26 @@ def test_gaussian_lobe_pdf_integrates_to_valid_fraction():
 
 
 def test_gaussian_lobe_invalid_samples():
-    u = smp.make_rng(3).random((10_000, 2))
-    d, valid = smp.gaussian_lobe(u, np.broadcast_to([0.9, 0.0], (len(u), 2)), np.array([0.3, 0.1]))
+    u = smp.make_rng(3).random((2, 10_000))
+    d, valid = smp.gaussian_lobe(u, np.broadcast_to(np.array([[0.9], [0.0]]), (2, u.shape[1])), np.array([0.3, 0.1]))
+    d = d.T
     np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, rtol=1e-14)
-    assert 0 < np.count_nonzero(~valid) < len(u)
+    assert 0 < np.count_nonzero(~valid) < len(d)
     assert np.all(d[~valid] == [0.0, 0.0, 1.0])
     assert np.all(np.sum(d[valid, :2] ** 2, axis=-1) < 1.0)
 
 
 def test_disk_aperture_pdf_matches_sampler():
-    u = smp.make_rng(4).random((100_000, 2))
-    origins = np.broadcast_to(ORIGIN, (len(u), 3))
+    u = smp.make_rng(4).random((2, 100_000))
+    origins = np.broadcast_to(ORIGIN[:, None], (3, u.shape[1]))
     d, dist, pdf = smp.sample_disk_aperture(origins, **APERTURE, u=u)
-    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, rtol=1e-14)
     assert np.all(pdf > 0.0)
     np.testing.assert_allclose(smp.disk_aperture_pdf(origins, d, **APERTURE), pdf, rtol=1e-10)
     flipped = {**APERTURE, "normal": -APERTURE["normal"]}
     np.testing.assert_allclose(smp.disk_aperture_pdf(origins, d, **flipped), pdf, rtol=1e-10)
-    offset = origins + dist[:, None] * d - APERTURE["center"]
-    assert np.all(np.linalg.norm(offset, axis=-1) <= APERTURE["radius"] * (1.0 + 1e-12))
+    offset = (origins + dist * d).T - APERTURE["center"]
+    assert np.all(np.linalg.norm(offset, axis=-1) <= APERTURE["radius"] * (1.0 + 1e-7))
     np.testing.assert_allclose(offset @ APERTURE["normal"], 0.0, atol=1e-10)
     # Opposite directions never reach the disk.
     np.testing.assert_array_equal(smp.disk_aperture_pdf(origins, -d, **APERTURE), 0.0)
@@ -450,12 +459,12 @@ def test_disk_aperture_pdf_matches_sampler():
 def test_disk_aperture_pdf_integrates_to_one():
     # Over the cone around the axis origin -> centre that contains the disk.
     axis = APERTURE["center"] - ORIGIN
-    t, b, a = smp.frame_from_normal(axis[None, :])
+    t, b, a = smp.frame_from_normal(axis[:, None])
     cos_max = math.sqrt(1.0 - (APERTURE["radius"] / np.linalg.norm(axis)) ** 2)
 
     def pdf(phi, cos_theta):
         d = smp.to_world(sphere_direction(phi, cos_theta), t, b, a)
-        return smp.disk_aperture_pdf(np.broadcast_to(ORIGIN, d.shape), d, **APERTURE)
+        return smp.disk_aperture_pdf(np.broadcast_to(ORIGIN[:, None], d.shape), d, **APERTURE)
 
     # The density jumps at the disk's rim, so the quadrature is only accurate to ~1e-4.
     total = gauss_legendre_2d(pdf, ((0.0, TWO_PI), (cos_max, 1.0)), (250, 250), order=4)
@@ -463,22 +472,25 @@ def test_disk_aperture_pdf_integrates_to_one():
 
 
 def test_sample_disk_aperture_origin_in_plane():
-    u = smp.make_rng(5).random((1000, 2))
-    tangent = smp.frame_from_normal(APERTURE["normal"][None, :])[0]
-    origins = np.broadcast_to(APERTURE["center"] + 2.5 * APERTURE["radius"] * tangent, (len(u), 3))
+    u = smp.make_rng(5).random((2, 1000))
+    tangent = smp.frame_from_normal(APERTURE["normal"][:, None])[0][:, 0]
+    origins = np.broadcast_to((APERTURE["center"] + 2.5 * APERTURE["radius"] * tangent)[:, None], (3, u.shape[1]))
     d, _, pdf = smp.sample_disk_aperture(origins, **APERTURE, u=u)
     np.testing.assert_array_equal(pdf, 0.0)
-    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, rtol=1e-14)
     np.testing.assert_array_equal(smp.disk_aperture_pdf(origins, d, **APERTURE), 0.0)
 
 
 def test_triangle_areas_and_sample_triangles():
     np.testing.assert_allclose(smp.triangle_areas(MESH)[[0, 2]], [6.0, 0.0])
-    points, tri, bary = smp.sample_triangles(MESH, smp.make_rng(6).random((10_000, 3)))
+    points, tri = smp.sample_triangles(MESH, smp.make_rng(6).random((3, 10_000)))
     assert not np.any(tri == 2)
-    assert np.all(bary >= 0.0)
-    np.testing.assert_allclose(np.sum(bary, axis=-1), 1.0, rtol=1e-15)
-    np.testing.assert_allclose(points, np.einsum("nk,nkj->nj", bary, MESH[tri]), atol=1e-12)
+    v = MESH[tri]
+    s, w = vertex_polar(points.T, v[:, 0], v[:, 1], v[:, 2]).T
+    assert np.all((s >= -1e-12) & (s <= 1 + 1e-12) & (w >= -1e-12) & (w <= 1 + 1e-12))
+    # Points lie in their triangles' planes.
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    np.testing.assert_allclose(np.sum((points.T - v[:, 0]) * normal, axis=-1), 0.0, atol=1e-12)
 
 
 def test_sample_discrete_pmf_and_errors():

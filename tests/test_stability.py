@@ -35,18 +35,27 @@ def _panel_in_view(folder, panel_mm: float, pupil_mm: float, screen: bool = Fals
 
 
 def test_backward_with_a_shrinking_source(tmp_path):
-    """A source behind a diffuse screen shrinks toward a point (the paper's LED behind a scatterer):
-    backward efficiency falls with its area, the report warns once the image is noise, and nothing
-    becomes NaN."""
-    effs, warned = [], []
+    """A source behind a diffuse screen shrinks toward a point (the paper's LED behind a scatterer).
+    The paper's plain backward method: efficiency falls with the source's area, the report warns once
+    the image is noise, and nothing becomes NaN. With next-event estimation every screen point connects
+    to the source whatever its size: the efficiency stays 1 and the relative error of the image mean
+    stays put while the mean falls by 10^6."""
+    effs, warned, rel = [], [], []
     for size in (20.0, 2.0, 0.2, 0.02):
         folder = _panel_in_view(tmp_path / f"src{size}", size, 4.0, screen=True)
+        edit_json(folder, lambda d: d.update(methods={"backward": {"next_event": False}}))
         report = _report(folder, "backward", 400_000, tmp_path)
         effs.append(report["efficiency"])
         warned.append(bool(report["warnings"]))
+        edit_json(folder, lambda d: d.update(methods={"backward": {"next_event": True}}))
+        report = _report(folder, "backward", 400_000, tmp_path, seed=2)
+        assert report["efficiency"] == 1.0 and report["method_details"]["connection_share"] > 0.8
+        lum = report["luminance"]
+        rel.append(lum["mean_standard_error"] / lum["mean"])
     assert effs[0] > effs[1] > effs[2] >= effs[3]
     assert effs[1] == pytest.approx(effs[0] / 100, rel=0.5)
     assert not warned[0] and warned[2] and warned[3]
+    assert max(rel) < 2.0 * min(rel) and max(rel) < 0.01
 
 
 def test_forward_with_a_shrinking_pupil(tmp_path):

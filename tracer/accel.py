@@ -1,9 +1,15 @@
 """The one module that talks to Embree (through embreex).
 
+All traced objects form one Embree geometry, so a hit's primitive id is a global face index; tables
+indexed by it give the object slot, the triangle's plane and its vertices' normals and texture
+coordinates. Rays come in and hits go out as (3, n) planes (:mod:`tracer.vec`).
+
 Embree works in float32. To keep millimetre optics exact enough for sub-pixel edge positions the
 scene is re-centred on its bounding-box centre before it reaches Embree, every hit distance is
-refined in float64 against the triangle's plane, and new rays start a scale-aware distance off the
-surface (:meth:`Accelerator.spawn`).
+refined in float64 against the triangle's plane, barycentric coordinates are recomputed in float64
+from the geometry (finer than Embree's and independent of its BVH, so a batch gives the same numbers
+in every process), and new rays start a scale-aware distance off the surface (:meth:`Accelerator.spawn`).
+Shadow rays use Embree's occlusion query (any hit, no closest-hit search).
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import axpy, dot, max3, norm, rows
+from .vec import cross, dot, max3, norm
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -22,123 +28,149 @@ OFFSET_SCALE = 2e-6
 
 @dataclass
 class Hits:
-    """Closest hits of a ray batch; arrays of length n, world mm, float64.
+    """Closest hits of a ray batch: ``face`` (n,) global face index or -1 for a miss, ``t`` (n,)
+    distance in mm (inf for a miss), float64."""
 
-    ``obj`` is the slot of the object in the accelerator's list (-1 for a miss), ``face`` the
-    triangle index inside that object, ``t`` the distance (inf for a miss), ``points`` the hit points
-    (the ray origin for a miss), ``normals`` the unit geometric normals (0 for a miss). Barycentric
-    coordinates are computed on demand (:meth:`bary`): most surfaces need none.
-    """
-
-    obj: np.ndarray
     face: np.ndarray
     t: np.ndarray
-    points: np.ndarray
-    normals: np.ndarray
-    gface: np.ndarray
-    accel: Accelerator
 
     @property
     def hit(self) -> np.ndarray:
-        return self.obj >= 0
-
-    def by_object(self, mask: np.ndarray | None = None) -> list[tuple[int, np.ndarray]]:
-        """(slot, ray indices in increasing order) for every object hit (by the rays where ``mask``),
-        slots in increasing order; a bincount, not a sort, so it costs a pass per object."""
-        obj = self.obj if mask is None else np.where(mask, self.obj, -1)
-        counts = np.bincount(obj + 1)
-        return [(int(s) - 1, np.flatnonzero(obj == s - 1)) for s in np.flatnonzero(counts[1:]) + 1]
-
-    def bary(self, idx: np.ndarray) -> np.ndarray:
-        """(u, v) of the hits ``idx`` on their triangles, (k, 2)."""
-        return self.accel.barycentrics(self.gface[idx], self.points[idx])
+        return self.face >= 0
 
 
 class Accelerator:
-    """Embree scene over triangle meshes (one geometry per mesh, geomID = slot).
+    """Embree scene over the triangle meshes of ``objects`` (scene objects, in world mm).
 
-    Parameters
+    Attributes
     ----------
-    meshes : list of (vertices (v, 3) float64 mm, faces (f, 3) int)
+    face_slot : (F,) the object slot of every global face. first_face : {slot: first global face}.
+    v0, e1, e2, normal : (3, F) planes of every triangle (corner, edges, unit geometric normal).
+    rays_traced : int, every ray segment handed to Embree (closest-hit and shadow rays).
     """
 
-    def __init__(self, meshes: list[tuple[np.ndarray, np.ndarray]]):
-        if not meshes:
+    def __init__(self, objects: list):
+        if not objects:
             raise ValueError("an accelerator needs at least one mesh")
-        allv = np.concatenate([v for v, _ in meshes])
+        allv = np.concatenate([o.vertices for o in objects])
         self.center = 0.5 * (allv.min(axis=0) + allv.max(axis=0))
+        self.center_col = self.center.reshape(3, 1)
         self.extent = float(np.abs(allv - self.center).max())
+        verts, faces, slots, firsts = [], [], [], {}
+        vnormal, vuv, has_n, has_uv = [], [], [], []
+        offset = nfaces = 0
+        for o in objects:
+            verts.append(o.vertices)
+            faces.append(o.faces + offset)
+            firsts[o.slot] = nfaces
+            slots.append(np.full(len(o.faces), o.slot, np.int64))
+            vnormal.append(o.normals if o.normals is not None else np.zeros_like(o.vertices))
+            vuv.append(o.uv if o.uv is not None else np.zeros((len(o.vertices), 2)))
+            has_n.append(np.full(len(o.faces), o.normals is not None))
+            has_uv.append(np.full(len(o.faces), o.uv is not None))
+            offset += len(o.vertices)
+            nfaces += len(o.faces)
+        vertices = np.concatenate(verts)
+        f = np.concatenate(faces)
         self._scene = EmbreeScene()
-        v0s, e1s, e2s, ns, offsets = [], [], [], [], [0]
-        for vertices, faces in meshes:
-            local = (vertices - self.center).astype(np.float32)
-            TriangleMesh(self._scene, local, np.ascontiguousarray(faces, dtype=np.int32))
-            tri = vertices[faces]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            length = norm(n)[:, None]
-            ns.append(np.divide(n, length, out=np.zeros_like(n), where=length > 0))
-            v0s.append(tri[:, 0])
-            e1s.append(tri[:, 1] - tri[:, 0])
-            e2s.append(tri[:, 2] - tri[:, 0])
-            offsets.append(offsets[-1] + len(faces))
-        self._v0 = np.concatenate(v0s)
-        self._e1, self._e2 = np.concatenate(e1s), np.concatenate(e2s)
-        self._n = np.concatenate(ns)
-        self._offsets = np.array(offsets[:-1], dtype=np.int64)
+        TriangleMesh(self._scene, (vertices - self.center).astype(np.float32), np.ascontiguousarray(f, np.int32))
+        self.face_slot = np.concatenate(slots)
+        self.first_face = firsts
+        tri = vertices[f]
+        self.v0 = np.ascontiguousarray(tri[:, 0].T)
+        self.e1 = np.ascontiguousarray((tri[:, 1] - tri[:, 0]).T)
+        self.e2 = np.ascontiguousarray((tri[:, 2] - tri[:, 0]).T)
+        c = cross(self.e1, self.e2)
+        length = norm(c)
+        self.normal = c / np.where(length > 0, length, 1.0)
+        self.corner = np.ascontiguousarray(f.T)  # (3, F) global vertex indices of each face's corners
+        self.vertex_normal = np.ascontiguousarray(np.concatenate(vnormal).T)  # (3, V)
+        self.vertex_uv = np.ascontiguousarray(np.concatenate(vuv).T)  # (2, V)
+        self.face_has_normals = np.concatenate(has_n)
+        self.face_has_uv = np.concatenate(has_uv)
+        self.faces = nfaces
         self.rays_traced = 0
 
-    def intersect(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None) -> Hits:
-        """Closest hits of rays (origins (n, 3), unit dirs (n, 3), world mm); one Embree call."""
-        n = len(origins)
+    def _rays32(self, o: np.ndarray, d: np.ndarray):
+        n = o.shape[1]
+        o32 = np.empty((n, 3), np.float32)
+        d32 = np.empty((n, 3), np.float32)
+        for i in range(3):
+            o32[:, i] = o[i] - self.center[i]
+            d32[:, i] = d[i]
+        return o32, d32
+
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> Hits:
+        """Closest hits of rays (origins (3, n) mm, unit directions (3, n)); one Embree call."""
+        n = o.shape[1]
         self.rays_traced += n
         if n == 0:
-            z = np.zeros(0, np.int64)
-            return Hits(z, z, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), z, self)
-        o32 = (origins - self.center).astype(np.float32)
-        d32 = dirs.astype(np.float32)
-        if tmax is None:
-            res = self._scene.run(o32, d32, output=True)
-        else:
-            res = self._scene.run(o32, d32, dists=np.ascontiguousarray(tmax, dtype=np.float32), output=True)
-        geom = res["geomID"]
-        idx = np.flatnonzero(geom >= 0)
-        obj = np.full(n, -1, np.int64)
-        face = np.zeros(n, np.int64)
-        gface = np.zeros(n, np.int64)
+            return Hits(np.zeros(0, np.int64), np.zeros(0))
+        o32, d32 = self._rays32(o, d)
+        res = self._scene.run(o32, d32, output=True)
+        face = res["primID"].astype(np.int64)
         t = np.full(n, np.inf)
-        points = origins.copy()
-        normals = np.zeros((n, 3))
+        idx = np.flatnonzero(face >= 0)
         if len(idx):
-            o_h, d_h = rows(origins, idx), rows(dirs, idx)
-            obj_h = geom[idx].astype(np.int64)
-            face_h = res["primID"][idx].astype(np.int64)
-            g = self._offsets[obj_h] + face_h
-            ng = rows(self._n, g)
+            f = face[idx]
+            o_h, d_h = np.take(o, idx, axis=1), np.take(d, idx, axis=1)
+            ng = np.take(self.normal, f, axis=1)
             # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
             denom = dot(d_h, ng)
             ok = np.abs(denom) > 1e-9
-            t_h = np.where(ok, dot(rows(self._v0, g) - o_h, ng) / np.where(ok, denom, 1.0),
-                           res["tfar"][idx].astype(np.float64))
-            obj[idx], face[idx], gface[idx], t[idx], normals[idx] = obj_h, face_h, g, t_h, ng
-            points[idx] = axpy(t_h, d_h, o_h)
-        return Hits(obj, face, t, points, normals, gface, self)
+            t[idx] = np.where(ok, dot(np.take(self.v0, f, axis=1) - o_h, ng) / np.where(ok, denom, 1.0),
+                              res["tfar"][idx].astype(np.float64))
+        return Hits(face, t)
 
-    def barycentrics(self, gface: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """(u, v) of points on their triangles (global face indices ``gface``), (n, 2), in float64
-        from the geometry itself: finer than Embree's float32 values and independent of how Embree
-        built its BVH, so a batch gives the same numbers in every process."""
-        e1, e2 = rows(self._e1, gface), rows(self._e2, gface)
-        w = points - rows(self._v0, gface)
+    def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:
+        """Whether anything lies on the segments o + s d, 0 < s < tmax ((3, n), (3, n), (n,) mm);
+        one Embree occlusion call. (n,) bool."""
+        n = o.shape[1]
+        self.rays_traced += n
+        if n == 0:
+            return np.zeros(0, bool)
+        o32, d32 = self._rays32(o, d)
+        tm = np.ascontiguousarray(np.minimum(tmax, 3.0e38), dtype=np.float32)
+        return self._scene.run(o32, d32, dists=tm, query="OCCLUDED") == 0
+
+    def barycentrics(self, face: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """(u, v), (2, n), of points ``p`` (3, n) on their triangles ``face`` (n,), in float64."""
+        e1, e2 = np.take(self.e1, face, axis=1), np.take(self.e2, face, axis=1)
+        w = p - np.take(self.v0, face, axis=1)
         d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
         w1, w2 = dot(w, e1), dot(w, e2)
         det = d11 * d22 - d12 * d12
         det = np.where(det > 0, det, 1.0)
-        return np.stack([(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det], axis=1)
+        return np.stack([(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det])
 
-    def spawn(self, points: np.ndarray, normals: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """Origins for rays leaving surface ``points`` along ``dirs``: offset along the geometric
-        normal to the side the ray goes, by a distance that scales with the coordinates' magnitude
-        (float32 Embree resolves about 6e-8 of it)."""
-        offset = OFFSET_SCALE * (1.0 + max3(np.abs(points - self.center)))
-        side = np.where(dot(dirs, normals) >= 0, 1.0, -1.0)
-        return axpy(side * offset, normals, points)
+    def shading(self, face: np.ndarray, p: np.ndarray, ng: np.ndarray):
+        """Shading normals (3, n) (interpolated vertex normals on the side of ``ng``; ``ng`` itself for
+        flat objects) and texture coordinates (2, n) or None, at points ``p`` on faces ``face``."""
+        with_n = self.face_has_normals[face]
+        with_uv = self.face_has_uv[face]
+        if not (with_n.any() or with_uv.any()):
+            return ng, None
+        bary = self.barycentrics(face, p)
+        w0 = 1.0 - bary[0] - bary[1]
+        corner = np.take(self.corner, face, axis=1)
+        ns, uv = ng, None
+        if with_n.any():
+            vn = self.vertex_normal
+            s = (w0 * np.take(vn, corner[0], axis=1) + bary[0] * np.take(vn, corner[1], axis=1)
+                 + bary[1] * np.take(vn, corner[2], axis=1))
+            s = s / np.maximum(norm(s), 1e-300)
+            s = np.where(dot(s, ng) < 0, -s, s)
+            ns = np.where(with_n, s, ng)
+        if with_uv.any():
+            t = self.vertex_uv
+            uv = (w0 * np.take(t, corner[0], axis=1) + bary[0] * np.take(t, corner[1], axis=1)
+                  + bary[1] * np.take(t, corner[2], axis=1))
+        return ns, uv
+
+    def spawn(self, p: np.ndarray, ng: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Origins (3, n) for rays leaving surface points ``p`` along ``d``: offset along the
+        geometric normal ``ng`` to the side the ray goes, by a distance that scales with the
+        coordinates' magnitude (float32 Embree resolves about 6e-8 of it)."""
+        offset = OFFSET_SCALE * (1.0 + max3(np.abs(p - self.center_col)))
+        side = np.where(dot(d, ng) >= 0, offset, -offset)
+        return p + side * ng

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
-from .parallel import _WORKER, _run_batch
+from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
 from .scene import load_scene
 
 _UNPACKED: dict[str, str] = {}
@@ -51,6 +51,29 @@ def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_siz
     return _run_batch(index)
 
 
+class DaskExecutor:
+    """The driver's executor over a Dask client: futures, waited for with FIRST_COMPLETED."""
+
+    def __init__(self, client, submit, workers: int):
+        self.client, self._submit, self.workers = client, submit, workers
+
+    def submit(self, index: int):
+        return self._submit(index)
+
+    def wait(self, handles: dict, timeout: float | None) -> list[int]:
+        from distributed import wait
+
+        futures = {f: k for k, f in handles.items()}
+        try:
+            done, _ = wait(list(futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            return []
+        return [futures[f] for f in done]
+
+    def result(self, handle):
+        return handle.result()
+
+
 def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
                 should_stop=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
@@ -64,6 +87,7 @@ def render_dask(local, budget: Budget, client, in_flight: int | None = None, pro
         return client.submit(_batch_on_worker, *args, k, pure=False,
                              key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
 
-    result = drive(local, budget, submit, in_flight or 2 * workers, progress, should_stop, f"dask x{workers}")
+    result = drive(local, budget, DaskExecutor(client, submit, workers), in_flight or 2 * workers, progress,
+                   should_stop, f"dask x{workers}")
     result.extra["dask_workers"] = workers
     return result

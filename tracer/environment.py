@@ -18,6 +18,12 @@ at the centre of the image, +y at a quarter of its width, -y at three quarters, 
 left/right seam, +z along the top row. This is ``direction_to_equirectangular`` of Cycles
 (intern/cycles/kernel/camera/projection.h) and ``node_tex_environment_equirectangular`` of
 EEVEE. (Mind the sign: ``-atan2(y, x)``, not ``atan2(y, -x)``, which is half a turn away.)
+
+Directions are (3, n) planes (:mod:`tracer.vec`). Every environment can also be sampled for
+next-event estimation: ``sample(u)`` draws directions with a density ``pdf(d)`` per steradian;
+:class:`HdriEnvironment` draws pixels in proportion to luminance times solid angle (the luminance
+times sin(theta) of the continuous panorama), then a uniform direction inside the pixel (Pharr,
+Jakob and Humphreys, "Physically Based Rendering", 3rd ed., sec. 14.2.4, "Infinite area lights").
 """
 
 from __future__ import annotations
@@ -38,10 +44,10 @@ CALIBRATION_MODES = ("scale", "mean", "max")
 
 
 def _as_directions(d) -> np.ndarray:
-    """``d`` as a float64 array of shape (n, 3) of finite values, or ``ValueError``."""
+    """``d`` as a float64 array of shape (3, n) of finite values, or ``ValueError``."""
     d = np.asarray(d, dtype=np.float64)
-    if d.ndim != 2 or d.shape[1] != 3:
-        raise ValueError(f"directions must have shape (n, 3), got {d.shape}")
+    if d.ndim != 2 or d.shape[0] != 3:
+        raise ValueError(f"directions must have shape (3, n), got {d.shape}")
     if not np.all(np.isfinite(d)):
         raise ValueError("directions must be finite")
     return d
@@ -52,7 +58,7 @@ def direction_to_equirect(d) -> tuple[np.ndarray, np.ndarray]:
 
     Parameters
     ----------
-    d : array_like, shape (n, 3)
+    d : array_like, shape (3, n)
         Directions (any non-zero length; z up).
 
     Returns
@@ -63,8 +69,8 @@ def direction_to_equirect(d) -> tuple[np.ndarray, np.ndarray]:
         Vertical coordinate in [0, 1], 1 at the top edge (image row 0, the +z pole).
     """
     d = _as_directions(d)
-    u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * np.pi)
-    v = 0.5 + np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi
+    u = 0.5 - np.arctan2(d[1], d[0]) / (2.0 * np.pi)
+    v = 0.5 + np.arctan2(d[2], np.hypot(d[0], d[1])) / np.pi
     return u, v
 
 
@@ -78,36 +84,34 @@ def equirect_to_direction(u, v) -> np.ndarray:
 
     Returns
     -------
-    np.ndarray, shape (n, 3), float64
+    np.ndarray, shape (3, n), float64
         Unit directions (z up).
     """
     azimuth = np.pi * (1.0 - 2.0 * np.asarray(u, dtype=np.float64))
     latitude = np.pi * (np.asarray(v, dtype=np.float64) - 0.5)
     cos_lat = np.cos(latitude)
-    return np.stack(
-        [cos_lat * np.cos(azimuth), cos_lat * np.sin(azimuth), np.sin(latitude)], axis=-1
-    )
+    return np.stack([cos_lat * np.cos(azimuth), cos_lat * np.sin(azimuth), np.sin(latitude)])
 
 
 def _bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Bilinear lookup of ``image`` (H, W, 3) at (u, v) of shape (n,); wraps in u, clamps in v.
 
     Pixel (row i, column j) has its centre at u = (j + 0.5) / W, v = 1 - (i + 0.5) / H.
-    Returns (n, 3) float64.
+    Returns (3, n) float64.
     """
     height, width = image.shape[:2]
     x = u * width - 0.5
     y = (1.0 - v) * height - 0.5
     x0 = np.floor(x)
     y0 = np.floor(y)
-    fx = (x - x0)[:, None]
-    fy = (y - y0)[:, None]
+    fx = x - x0
+    fy = y - y0
     col0 = x0.astype(np.intp) % width
     col1 = (col0 + 1) % width
     row0 = np.clip(y0.astype(np.intp), 0, height - 1)
     row1 = np.clip(y0.astype(np.intp) + 1, 0, height - 1)
-    top = image[row0, col0] * (1.0 - fx) + image[row0, col1] * fx
-    bottom = image[row1, col0] * (1.0 - fx) + image[row1, col1] * fx
+    top = image[row0, col0].T * (1.0 - fx) + image[row0, col1].T * fx
+    bottom = image[row1, col0].T * (1.0 - fx) + image[row1, col1].T * fx
     return top * (1.0 - fy) + bottom * fy
 
 
@@ -142,14 +146,23 @@ class Environment(ABC):
 
         Parameters
         ----------
-        d : array_like, shape (n, 3)
+        d : array_like, shape (3, n)
             Unit directions pointing away from the scene (z up).
 
         Returns
         -------
-        np.ndarray, shape (n, 3), float64
+        np.ndarray, shape (3, n), float64
             Linear Rec.709 RGB whose luminance Y is in cd/m^2.
         """
+
+    def sample(self, u: np.ndarray):
+        """Directions toward the environment for next-event estimation: u (2, n) -> (unit directions
+        (3, n), radiance arriving from them (3, n), density (n,) per steradian)."""
+        raise NotImplementedError("a black environment has nothing to sample")
+
+    def pdf(self, d: np.ndarray) -> np.ndarray:
+        """The density of :meth:`sample` at unit directions ``d`` (3, n), per steradian; (n,)."""
+        return np.zeros(d.shape[1])
 
     @property
     @abstractmethod
@@ -171,7 +184,7 @@ class NoEnvironment(Environment):
     """No environment: black in every direction."""
 
     def radiance(self, d) -> np.ndarray:
-        return np.zeros((_as_directions(d).shape[0], 3))
+        return np.zeros((3, _as_directions(d).shape[1]))
 
     @property
     def mean_luminance(self) -> float:
@@ -208,7 +221,18 @@ class UniformEnvironment(Environment):
         self._rgb = self.luminance_cd_m2 * self.color
 
     def radiance(self, d) -> np.ndarray:
-        return np.repeat(self._rgb[None, :], _as_directions(d).shape[0], axis=0)
+        return np.repeat(self._rgb[:, None], _as_directions(d).shape[1], axis=1)
+
+    def sample(self, u):
+        """Uniform directions on the sphere (density 1 / (4 pi))."""
+        from .sampling import uniform_sphere
+
+        d = uniform_sphere(u)
+        n = d.shape[1]
+        return d, np.repeat(self._rgb[:, None], n, axis=1), np.full(n, 1.0 / (4.0 * np.pi))
+
+    def pdf(self, d):
+        return np.full(np.shape(d)[1], 1.0 / (4.0 * np.pi))
 
     @property
     def mean_luminance(self) -> float:
@@ -313,6 +337,19 @@ class HdriEnvironment(Environment):
         self._max = self._k * raw_max
         angle = math.radians(self.rotation_deg)
         self._cos, self._sin = math.cos(angle), math.sin(angle)
+        # Sampling: pixels in proportion to luminance times solid angle (row fractions), built once.
+        self._weights = None
+
+    def _distribution(self):
+        """(pixel distribution over H * W row-major, the pixels' solid angles (H,) sr), built on first use."""
+        if self._weights is None:
+            from .sampling import Distribution1D
+
+            h, w = self._image.shape[:2]
+            omega = 4.0 * np.pi * row_solid_angle_fractions(h) / w  # sr per pixel of each row
+            weights = luminance(self._image) * omega[:, None]
+            self._weights = (Distribution1D(weights.ravel()) if weights.max() > 0 else None, omega)
+        return self._weights
 
     @property
     def scale_factor(self) -> float:
@@ -320,13 +357,47 @@ class HdriEnvironment(Environment):
         "scale"; cd/m^2 per unit of image luminance for "mean" and "max")."""
         return self._k
 
+    def _to_image(self, d: np.ndarray) -> np.ndarray:
+        """World directions (3, n) to the panorama's frame: rotated by -rotation_deg about +z."""
+        x = self._cos * d[0] + self._sin * d[1]
+        y = -self._sin * d[0] + self._cos * d[1]
+        return np.stack([x, y, d[2]])
+
     def radiance(self, d) -> np.ndarray:
-        d = _as_directions(d)
-        # Rotate by -rotation_deg about +z: (x, y) -> (c x + s y, -s x + c y).
-        x = self._cos * d[:, 0] + self._sin * d[:, 1]
-        y = -self._sin * d[:, 0] + self._cos * d[:, 1]
-        u, v = direction_to_equirect(np.stack([x, y, d[:, 2]], axis=-1))
+        u, v = direction_to_equirect(self._to_image(_as_directions(d)))
         return self._k * _bilinear(self._image, u, v)
+
+    def sample(self, u):
+        """A pixel in proportion to its luminance times its solid angle (u[0]), then a direction
+        uniform in solid angle inside it (azimuth and sin(latitude) uniform in the pixel's band)."""
+        dist, omega = self._distribution()
+        h, w = self._image.shape[:2]
+        idx, pmf = dist.sample(u[0])
+        row, column = idx // w, idx % w
+        # Reuse u[0]'s position inside the chosen pixel's cdf step for the azimuth (stratified).
+        lo = np.where(idx > 0, dist.cdf[np.maximum(idx - 1, 0)], 0.0)
+        frac = np.clip((u[0] * dist.total - lo) / np.maximum(dist.cdf[idx] - lo, 1e-300), 0.0, 1.0)
+        uu = (column + frac) / w
+        z_top = np.sin(0.5 * np.pi - np.pi * row / h)
+        z_bottom = np.sin(0.5 * np.pi - np.pi * (row + 1) / h)
+        z = z_bottom + u[1] * (z_top - z_bottom)
+        r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        azimuth = np.pi * (1.0 - 2.0 * uu)
+        local = np.stack([r * np.cos(azimuth), r * np.sin(azimuth), z])
+        # Back to the world: rotate by +rotation_deg about +z.
+        d = np.stack([self._cos * local[0] - self._sin * local[1], self._sin * local[0] + self._cos * local[1],
+                      local[2]])
+        return d, self.radiance(d), pmf / omega[row]
+
+    def pdf(self, d):
+        dist, omega = self._distribution()
+        if dist is None:
+            return np.zeros(np.shape(d)[1])
+        h, w = self._image.shape[:2]
+        u, v = direction_to_equirect(self._to_image(_as_directions(d)))
+        column = np.clip(np.floor(u * w).astype(np.int64), 0, w - 1)
+        row = np.clip(np.floor((1.0 - v) * h).astype(np.int64), 0, h - 1)
+        return dist.pmf(row * w + column) / omega[row]
 
     @property
     def mean_luminance(self) -> float:

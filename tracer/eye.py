@@ -10,6 +10,8 @@ Retina positions are given as perceived: ``(sx, sy)`` is the point where the chi
 direction (sx, sy, f) meets the plane z = f, i.e. the inverted physical retina point (-sx, -sy, -f)
 turned upright. Pixel (0, 0) is top-left, as the image is seen.
 
+Points and directions are (3, n) planes (:mod:`tracer.vec`), pupil points (2, n).
+
 Apparent luminance. The lens is ideal and lossless: the flux L cos(theta) dOmega dA that crosses
 the pupil at x along a scene direction of angle theta to the axis lands, by the lens mapping
 p = f (x / s + tan theta), on the retina area f^2 dOmega / cos^3(theta). The retinal illuminance is
@@ -29,7 +31,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
-from .vec import axpy, dot, minus, normalize, scale
+from .vec import dot, normalize
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -55,6 +57,8 @@ class ThinLensEye:
         right = np.cross(self.gaze, spec.up)
         self.right = right / np.linalg.norm(right)
         self.up = np.cross(self.right, self.gaze)
+        self._pos, self._right, self._up, self._gaze = (v.reshape(3, 1) for v in
+                                                        (self.position, self.right, self.up, self.gaze))
         self.focal = float(spec.focal_length_mm)
         self.pupil_radius = 0.5 * float(spec.pupil_diameter_mm)
         self.pupil_area = math.pi * self.pupil_radius**2
@@ -69,12 +73,12 @@ class ThinLensEye:
 
     # -- geometry ---------------------------------------------------------------------------
     def to_local(self, v: np.ndarray) -> np.ndarray:
-        """World vectors (n, 3) to eye coordinates (n, 3)."""
-        return np.stack([dot(v, self.right), dot(v, self.up), dot(v, self.gaze)], axis=-1)
+        """World vectors (3, n) to eye coordinates (3, n)."""
+        return np.stack([dot(v, self._right), dot(v, self._up), dot(v, self._gaze)])
 
     def to_world(self, v: np.ndarray) -> np.ndarray:
-        """Eye-coordinate vectors (n, 3) to world vectors (n, 3)."""
-        return axpy(v[:, 2], self.gaze, axpy(v[:, 1], self.up, scale(self.right, v[:, 0])))
+        """Eye-coordinate vectors (3, n) to world vectors (3, n)."""
+        return v[0] * self._right + v[1] * self._up + v[2] * self._gaze
 
     def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
         """Perceived retina coordinates (sx (W,), sy (H,)) of pixel centres, mm."""
@@ -120,47 +124,55 @@ class ThinLensEye:
         Parameters
         ----------
         sx, sy : (n,) perceived retina coordinates, mm.
-        lens_xy : (n, 2) pupil points in eye coordinates, mm.
+        lens_xy : (2, n) pupil points in eye coordinates, mm.
 
         Returns
         -------
-        origins (n, 3), directions (n, 3) unit, world space; cos^4(theta) / f^2 (n,), 1/mm^2.
+        origins (3, n), directions (3, n) unit, world space; cos^4(theta) / f^2 (n,), 1/mm^2.
         """
         f, s = self.focal, self.accommodation
         if math.isinf(s):
-            d_local = np.stack([sx, sy, np.full_like(sx, f)], axis=1)
+            d_local = np.stack([sx, sy, np.full_like(sx, f)])
         else:
-            q = np.stack([sx * s / f - lens_xy[:, 0], sy * s / f - lens_xy[:, 1], np.full_like(sx, s)], axis=1)
-            d_local = q
+            d_local = np.stack([sx * (s / f) - lens_xy[0], sy * (s / f) - lens_xy[1], np.full_like(sx, s)])
         d_local = normalize(d_local)
-        origins = axpy(lens_xy[:, 1], self.up, axpy(lens_xy[:, 0], self.right, self.position))
-        return origins, self.to_world(d_local), d_local[:, 2] ** 4 / (f * f)
+        origins = self._pos + lens_xy[0] * self._right + lens_xy[1] * self._up
+        cos2 = d_local[2] * d_local[2]
+        return origins, self.to_world(d_local), cos2 * cos2 / (f * f)
 
     # -- forward: scene -> retina ---------------------------------------------------------------
     def pupil_hit(self, origins: np.ndarray, dirs: np.ndarray):
         """Intersections of rays with the pupil disk from the front (travelling against the gaze).
 
-        Returns (t (n,) with inf where there is no hit, lens points (n, 2) in eye coordinates).
+        Returns (t (n,) with inf where there is no hit, lens points (2, n) in eye coordinates, valid
+        where t is finite).
         """
-        rel = minus(origins, self.position)
-        dz = dot(dirs, self.gaze)
-        oz = dot(rel, self.gaze)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -oz / dz
-        ok = (dz < 0) & (oz > 0) & (t > 0)
-        hit = axpy(np.where(ok, t, 0.0), dirs, rel)
-        lx, ly = dot(hit, self.right), dot(hit, self.up)
-        ok &= lx * lx + ly * ly <= self.pupil_radius**2
-        return np.where(ok, t, np.inf), np.stack([lx, ly], axis=1)
+        n = origins.shape[1]
+        t = np.full(n, np.inf)
+        lens = np.zeros((2, n))
+        dz = dot(dirs, self._gaze)
+        oz = dot(origins, self._gaze) - float(self.position @ self.gaze)
+        cand = np.flatnonzero((dz < 0) & (oz > 0))
+        if len(cand) == 0:
+            return t, lens
+        o, d = np.take(origins, cand, axis=1), np.take(dirs, cand, axis=1)
+        tc = -oz[cand] / dz[cand]
+        rel = o - self._pos + tc * d
+        lx, ly = dot(rel, self._right), dot(rel, self._up)
+        ok = lx * lx + ly * ly <= self.pupil_radius**2
+        keep = cand[ok]
+        t[keep] = tc[ok]
+        lens[0, keep], lens[1, keep] = lx[ok], ly[ok]
+        return t, lens
 
     def retina_point(self, lens_xy: np.ndarray, dirs: np.ndarray):
         """Perceived retina coordinates (sx, sy) where the thin lens images rays (n,) that cross
-        the pupil at ``lens_xy`` travelling along world ``dirs`` (toward the eye)."""
+        the pupil at ``lens_xy`` (2, n) travelling along world ``dirs`` (3, n) (toward the eye)."""
         dl = self.to_local(dirs)
         f, s = self.focal, self.accommodation
         inv_s = 0.0 if math.isinf(s) else 1.0 / s
-        sx = f * (lens_xy[:, 0] * inv_s + dl[:, 0] / dl[:, 2])
-        sy = f * (lens_xy[:, 1] * inv_s + dl[:, 1] / dl[:, 2])
+        sx = f * (lens_xy[0] * inv_s + dl[0] / dl[2])
+        sy = f * (lens_xy[1] * inv_s + dl[1] / dl[2])
         return sx, sy
 
     def blur_diameter_mm(self, distance_mm: float) -> float:

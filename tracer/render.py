@@ -25,6 +25,7 @@ from .parallel import render_parallel
 from .scene import Scene, load_scene
 from .tonemap import log_average_luminance, tonemap_ward
 from .units import luminance
+from .world import World
 
 #: Median relative standard error of the lit pixels above which the report warns of noise.
 NOISY = 0.5
@@ -54,13 +55,13 @@ def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]
     return arg
 
 
-def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> dict:
+def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.analysis`.
 
     Masks come from the dominant chain: "symbol" where its LCD cell is clear, "background" where
     it is black (both eroded by one grid cell, so edges blurred by the pupil are left out).
     """
-    res = specular_paths(integrator)
+    res = specular_paths(world)
     grid_h, grid_w = res["grid"]
     pixels = res["pixels"]
     npts = len(pixels)
@@ -98,8 +99,7 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
         other[p["pixel"]] = p["lcd"]
         background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
     background = _erode(background)
-    lcd_obj = next(s for s in integrator.surfaces if s.kind == "lcd")
-    cr = lcd_obj.contrast
+    cr = next(o.material.params["contrast_ratio"] for o in world.scene.objects if o.material.type == "lcd")
     sections = {}
     for key, mask in (("symbol", symbol), ("background", background)):
         idx = np.nonzero(mask.ravel())[0]
@@ -128,7 +128,7 @@ def brightness_theorem(integrator, image_y: np.ndarray, var_y: np.ndarray) -> di
         g_lcd[ghost["pixel"]] = ghost["lcd"]
         g_open = (g_lcd >= 0.5).reshape(grid_h, grid_w)
         dy, dx = _shift(grid_lcd >= 0.5, g_open)
-        eye = integrator.eye
+        eye = world.eye
         px_mrad = 1000 * 2 * math.atan(eye.half_x / eye.focal) / eye.width
         g_sel = np.isin(ghost["pixel"], np.nonzero(g_lcd >= 0.5)[0])
         m_sel = np.isin(main["pixel"], np.nonzero(grid_lcd.ravel() >= 0.5)[0])
@@ -152,8 +152,22 @@ def adaptation_luminance(y: np.ndarray) -> float:
     return log_average_luminance(y[lit]) if lit.any() else log_average_luminance(y)
 
 
+def components_report(result: RenderResult) -> dict:
+    """Each film component's share of the image, its mean luminance and that mean's standard error."""
+    film = result.film
+    out = {}
+    total = float(luminance(film.rgb()).sum())
+    for name, kind in film.kinds.items():
+        y = luminance(film.component_rgb(name))
+        var = film.component_variance_y(name)
+        out[name] = {"normalised_by": kind, "count": film.norm[name], "mean_cd_m2": float(y.mean()),
+                     "standard_error_cd_m2": float(math.sqrt(var.sum()) / y.size),
+                     "share": float(y.sum()) / total if total > 0 else 0.0}
+    return out
+
+
 def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
-                 budget: Budget, analysis: dict | None) -> dict:
+                 budget: Budget, analysis: dict | None, efficiency_definition: str = "") -> dict:
     y = luminance(image)
     rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
     lit = y > 1e-6 * max(float(y.max()), 1e-300)
@@ -178,10 +192,13 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "seconds": result.seconds,
         "rays_per_second": result.rays_per_second,
         "efficiency": result.efficiency,
-        "efficiency_definition": ("particles that reached the retina / particles emitted" if result.method == "forward"
-                                  else "retina samples whose path reached a source or a lit environment / samples"),
+        "efficiency_definition": efficiency_definition,
         "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
-                      "log_average": log_average_luminance(y)},
+                      "log_average": log_average_luminance(y),
+                      "mean_standard_error": float(math.sqrt(var_y.sum()) / y.size)},
+        "components": components_report(result),
+        "replicates": result.film.replicates,
+        "stage_seconds": result.stages,
         "adaptation_luminance": preview_info["adaptation_luminance"],
         "noise": {"median_relative_standard_error_lit_pixels": median_err},
         "preview": preview_info,
@@ -203,7 +220,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
     kwargs = {"batch_size": batch_size} if batch_size else {}
-    integrator = INTEGRATORS[method](scene, seed, **kwargs)
+    world = World(scene)
+    integrator = INTEGRATORS[method](world, seed, **kwargs)
     if workers > 1:
         result = render_parallel(integrator, budget, workers, progress, should_stop)
     else:
@@ -214,8 +232,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
     y = luminance(image)
     preview, info = tonemap_ward(image, adaptation_luminance(y))
-    analysis = brightness_theorem(integrator, y, var_y) if analyse and integrator.accel is not None else None
-    report = build_report(scene, result, image, var_y, info, budget, analysis)
+    analysis = brightness_theorem(world, y, var_y) if analyse and world.accel is not None else None
+    report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),

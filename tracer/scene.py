@@ -24,18 +24,28 @@ scene.json, version 1::
         {"name": "mirror", "mesh": "meshes/mirror.obj",
          "transform": {"matrix": [[4 x 4]]} | {"translate": [..], "rotate_deg": [x, y, z], "scale": [..]},
          "smooth_normals": true,
-         "material": {"type": "mirror", "reflectance": 0.9}}
+         "material": {"type": "mirror", "reflectance": 0.9}},
+        {"name": "led", "mesh": "meshes/led.obj", "material": {"type": "absorber"},
+         "emission": {"luminance": 1e9, "aim": {"target": "scatterer", "share": 0.95}}}
       ],
-      "backward": {"max_depth": 32, "exit_pupil": {"object": "name" | "center_mm": [x, y], "radius_mm": r,
-                                                    "share": 0.5}},
-      "forward": {"max_depth": 32}
+      "methods": {"backward": {"max_depth": 32, "next_event": true,
+                               "exit_pupil": {"object": "name" | "center_mm": [x, y], "radius_mm": r, "share": 0.5}},
+                  "forward": {"max_depth": 32}}
     }
 
-Material types (``material.type``) and their fields are listed in :data:`MATERIAL_FIELDS`; the
-physics lives in :mod:`tracer.optics`. A scattering material and an emitter may carry
+Materials (``material.type``) and their fields are the schemas of :mod:`tracer.optics.materials`;
+the emission block is :data:`tracer.lights.EMISSION` (any material can emit). The material type
+``emitter`` of earlier files is short for an absorber with an emission block of the same fields.
+A scattering material and an emission may carry
 ``"aim": {"target": "eye" | "<object name>", "share": w, "mode": "toward" | "away"}``: the paper's
 directed split (sec. 2), used by the forward method. An object of type ``aperture`` is not traced:
-it is a virtual surface that names where an optical system's pupil is, for aiming and for the backward eq. (3) strata.
+it is a virtual surface that names where an optical system's pupil is, for aiming and for the
+backward eq. (3) strata.
+
+Method options live under ``methods``, one block per method, each validated by its method's own
+option schema (``Integrator.options``), so a new method adds options without touching this loader.
+Top-level ``forward`` and ``backward`` blocks of earlier files are read as ``methods.forward`` and
+``methods.backward``.
 
 Every error raises :class:`tracer.errors.SceneError` naming the file and the JSON field.
 """
@@ -51,31 +61,19 @@ from pathlib import Path
 import numpy as np
 
 from .environment import Environment, environment_from_spec
-from .errors import ImageReadError, SceneError
-from .imageio import read_image
+from .errors import SceneError
+from .lights import EMISSION, Emission, make_emission
+from .optics.materials import MATERIALS
 from .pupil import pupil_diameter_mm
-from .units import lambertian_luminance_cd_m2, normalize_color
+from .schema import fail_in, parse_block
 from .validate import FieldChecker
-from .vec import norm
 
 FORMAT = "hud-scene"
 VERSION = 1
 SCENE_FILE = "scene.json"
 
-#: Allowed fields of each material type: name -> (required fields, optional fields).
-MATERIAL_FIELDS: dict[str, tuple[set[str], set[str]]] = {
-    "mirror": ({"reflectance"}, set()),
-    "dielectric": ({"ior"}, {"ior_outside"}),
-    "coating": ({"reflectance", "transmittance"}, set()),
-    "absorber": (set(), set()),
-    "lambertian": ({"reflectance"}, {"aim"}),
-    "lambertian_transmitter": ({"transmittance"}, {"reflectance", "aim"}),
-    "diffuser": ({"transmittance", "sigma_deg"}, {"aim"}),
-    "lcd": ({"image"}, {"transmittance", "contrast_ratio", "image_encoding"}),
-    "emitter": (set(), {"luminance", "flux", "color", "two_sided", "aim"}),
-    "aperture": (set(), set()),
-}
-
+#: The legacy material type that stands for an absorber with an emission block.
+LEGACY_EMITTER = "emitter"
 
 
 @dataclass
@@ -103,14 +101,16 @@ class Material:
 
 @dataclass
 class SceneObject:
-    """One object: a triangle mesh in world millimetres and its material.
+    """One object: a triangle mesh in world millimetres, its material and, if it emits, its emission.
 
     Attributes
     ----------
+    index : position in scene.json's object list; it is also the object's ``slot`` in a render world.
     vertices : (v, 3) float64, mm, world space.
     faces : (f, 3) int64.
     normals : (v, 3) float64 unit vertex normals when ``smooth`` else None.
     uv : (v, 2) float64 texture coordinates or None.
+    local_x : (3,) the object's local x axis in the world (anisotropic lobes follow it).
     """
 
     name: str
@@ -122,6 +122,11 @@ class SceneObject:
     normals: np.ndarray | None = None
     uv: np.ndarray | None = None
     local_x: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    emission: Emission | None = None
+
+    @property
+    def slot(self) -> int:
+        return self.index
 
     @property
     def triangles(self) -> np.ndarray:
@@ -149,15 +154,6 @@ class EyeSpec:
 
 
 @dataclass
-class ExitPupil:
-    """Backward-method strata of eq. (3): a disk in the eye's pupil plane (eye coordinates, mm)."""
-
-    center_mm: np.ndarray
-    radius_mm: float
-    share: float
-
-
-@dataclass
 class Scene:
     """A loaded, validated scene."""
 
@@ -167,10 +163,11 @@ class Scene:
     eye: EyeSpec
     environment: Environment
     objects: list[SceneObject]
-    backward: dict
-    forward: dict
+    #: Validated options of each method named in scene.json (methods not named use their defaults).
+    methods: dict[str, dict]
     scene_hash: str
     raw: dict
+    file: str = SCENE_FILE
 
     def object(self, name: str) -> SceneObject:
         for obj in self.objects:
@@ -181,7 +178,16 @@ class Scene:
     @property
     def traced_objects(self) -> list[SceneObject]:
         """Objects that take part in ray intersection (virtual apertures do not)."""
-        return [o for o in self.objects if o.material.type != "aperture"]
+        return [o for o in self.objects if MATERIALS[o.material.type].traced]
+
+    def method_options(self, name: str) -> dict:
+        """The validated options of method ``name`` (its defaults when scene.json names none)."""
+        if name not in self.methods:
+            from .integrators import INTEGRATORS
+
+            self.methods[name] = INTEGRATORS[name].parse_options(FieldChecker(self.file), None,
+                                                                 f"methods.{name}", self)
+        return self.methods[name]
 
 
 def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
@@ -240,75 +246,34 @@ def _aim(ck: FieldChecker, spec, fld: str) -> Aim:
     return Aim(target, share, mode)
 
 
-def _material(ck: FieldChecker, spec, fld: str, root: Path) -> Material:
+def _material(ck: FieldChecker, spec, fld: str, root: Path) -> tuple[Material, dict | None, Aim | None]:
+    """(material, parsed emission fields of a legacy "emitter" or None, the emitter's aim or None)."""
     ck.obj(spec, fld)
     if "type" not in spec:
         ck.fail(f"{fld}.type", "missing required field")
     mtype = spec["type"]
-    if mtype not in MATERIAL_FIELDS:
-        ck.fail(f"{fld}.type", f"unknown material {json.dumps(mtype)} (known: {', '.join(MATERIAL_FIELDS)})")
-    required, optional = MATERIAL_FIELDS[mtype]
-    ck.keys(spec, fld, required | {"type"}, optional)
-    p: dict = {}
-    if mtype == "mirror":
-        p["reflectance"] = ck.rgb(spec["reflectance"], f"{fld}.reflectance")
-    elif mtype == "dielectric":
-        p["ior"] = ck.number(spec["ior"], f"{fld}.ior", min_value=1.0)
-        p["ior_outside"] = ck.number(spec.get("ior_outside", 1.0), f"{fld}.ior_outside", min_value=1.0)
-    elif mtype == "coating":
-        p["reflectance"] = ck.rgb(spec["reflectance"], f"{fld}.reflectance")
-        p["transmittance"] = ck.rgb(spec["transmittance"], f"{fld}.transmittance")
-        if np.any(p["reflectance"] + p["transmittance"] > 1 + 1e-12):
-            ck.fail(fld, "reflectance + transmittance must not exceed 1 (energy conservation)")
-    elif mtype == "lambertian":
-        p["reflectance"] = ck.rgb(spec["reflectance"], f"{fld}.reflectance")
-    elif mtype == "lambertian_transmitter":
-        p["transmittance"] = ck.rgb(spec["transmittance"], f"{fld}.transmittance")
-        p["reflectance"] = ck.rgb(spec.get("reflectance", 0.0), f"{fld}.reflectance")
-        if np.any(p["reflectance"] + p["transmittance"] > 1 + 1e-12):
-            ck.fail(fld, "reflectance + transmittance must not exceed 1 (energy conservation)")
-    elif mtype == "diffuser":
-        p["transmittance"] = ck.rgb(spec["transmittance"], f"{fld}.transmittance")
-        s = spec["sigma_deg"]
-        if isinstance(s, list):
-            sig = ck.vector(s, f"{fld}.sigma_deg", 2)
-        else:
-            sig = np.full(2, ck.number(s, f"{fld}.sigma_deg"))
-        if np.any(sig <= 0) or np.any(sig > 60):
-            ck.fail(f"{fld}.sigma_deg", "lobe widths must lie in (0, 60] degrees")
-        p["sigma"] = np.sin(np.radians(sig))  # width in direction-cosine space
-        p["sigma_deg"] = sig
-    elif mtype == "lcd":
-        rel = ck.string(spec["image"], f"{fld}.image")
-        enc = spec.get("image_encoding", "srgb")
-        if enc not in ("srgb", "linear"):
-            ck.fail(f"{fld}.image_encoding", 'expected "srgb" or "linear"')
-        try:
-            img = read_image(root / rel, linear=(enc == "linear"))
-        except ImageReadError as e:
-            raise SceneError(ck.file, f"{fld}.image", f"cannot read {rel}: {e.reason}") from None
-        img = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
-        if not np.all(np.isfinite(img)) or img.min() < 0 or img.max() > 1 + 1e-6:
-            ck.fail(f"{fld}.image", f"{rel}: transmittance values must lie in [0, 1]")
-        p["image"] = np.clip(img.astype(np.float64), 0.0, 1.0)
-        p["image_file"] = rel
-        p["transmittance"] = ck.rgb(spec.get("transmittance", 1.0), f"{fld}.transmittance")
-        p["contrast_ratio"] = ck.number(spec.get("contrast_ratio", 300.0), f"{fld}.contrast_ratio", min_value=1.0)
-    elif mtype == "emitter":
-        has_l, has_f = "luminance" in spec, "flux" in spec
-        if has_l == has_f:
-            ck.fail(fld, 'give exactly one of "luminance" (cd/m^2) or "flux" (lm)')
-        if has_l:
-            p["luminance"] = ck.number(spec["luminance"], f"{fld}.luminance", min_value=0.0)
-        else:
-            p["flux"] = ck.number(spec["flux"], f"{fld}.flux", min_value=0.0)
-        try:
-            p["color"] = normalize_color(ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), f"{fld}.color", max_value=None))
-        except ValueError as e:
-            ck.fail(f"{fld}.color", str(e))
-        p["two_sided"] = ck.boolean(spec.get("two_sided", False), f"{fld}.two_sided")
+    if mtype == LEGACY_EMITTER:
+        params = parse_block(ck, spec, fld, EMISSION.fields, root, extra_keys={"type", "aim"},
+                             alternatives=EMISSION.alternatives)
+        EMISSION.check(params, fail_in(ck, fld))
+        aim = _aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None
+        return Material("absorber", {}, None), params, aim
+    if not isinstance(mtype, str) or mtype not in MATERIALS:
+        known = ", ".join([*MATERIALS, LEGACY_EMITTER])
+        ck.fail(f"{fld}.type", f"unknown material {json.dumps(mtype)} (known: {known})")
+    schema = MATERIALS[mtype].schema
+    extra = {"type"} | ({"aim"} if schema.can_aim else set())
+    params = parse_block(ck, spec, fld, schema.fields, root, extra_keys=extra, alternatives=schema.alternatives)
+    if schema.check is not None:
+        schema.check(params, fail_in(ck, fld))
     aim = _aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None
-    return Material(mtype, p, aim)
+    return Material(mtype, params, aim), None, None
+
+
+def _emission(ck: FieldChecker, spec, fld: str) -> tuple[dict, Aim | None]:
+    params = parse_block(ck, spec, fld, EMISSION.fields, extra_keys={"aim"}, alternatives=EMISSION.alternatives)
+    EMISSION.check(params, fail_in(ck, fld))
+    return params, (_aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None)
 
 
 def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
@@ -396,40 +361,24 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])))
 
 
-def _method_block(ck: FieldChecker, spec, fld: str, optional: set[str]) -> dict:
-    spec = {} if spec is None else ck.obj(spec, fld)
-    ck.keys(spec, fld, set(), optional)
-    out = {"max_depth": int(ck.number(spec.get("max_depth", 32), f"{fld}.max_depth", min_value=1, max_value=1000))}
-    return out | {k: v for k, v in spec.items() if k != "max_depth"}
+def _methods(ck: FieldChecker, raw: dict, scene: Scene) -> dict[str, dict]:
+    """Validate the "methods" block (and the legacy top-level "forward"/"backward" blocks) with each
+    method's own option schema."""
+    from .integrators import INTEGRATORS
 
-
-def _exit_pupil(ck: FieldChecker, spec, scene_objects: list[SceneObject], eye: EyeSpec) -> ExitPupil:
-    """Eq. (3) strata: a disk given in pupil-plane coordinates or projected from a named object."""
-    fld = "backward.exit_pupil"
-    ck.obj(spec, fld)
-    ck.keys(spec, fld, {"share"}, {"object", "center_mm", "radius_mm"})
-    share = ck.number(spec["share"], f"{fld}.share", min_value=0.0)
-    if share >= 1.0:
-        ck.fail(f"{fld}.share", "must be < 1: the rest of the pupil keeps samples (unbiasedness)")
-    if "object" in spec:
-        if "center_mm" in spec or "radius_mm" in spec:
-            ck.fail(fld, 'give either "object" or "center_mm" and "radius_mm", not both')
-        name = ck.string(spec["object"], f"{fld}.object")
-        matches = [o for o in scene_objects if o.name == name]
-        if not matches:
-            ck.fail(f"{fld}.object", f"no object named {json.dumps(name)}")
-        # Project the object's vertices along the gaze onto the pupil plane (eye coordinates).
-        right = np.cross(eye.gaze, eye.up)
-        right /= np.linalg.norm(right)
-        upv = np.cross(right, eye.gaze)
-        rel = matches[0].vertices - eye.position
-        xy = np.stack([rel @ right, rel @ upv], axis=1)
-        center = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
-        radius = float(np.linalg.norm(xy - center, axis=1).max())
-    else:
-        center = ck.vector(spec.get("center_mm"), f"{fld}.center_mm", 2)
-        radius = ck.number(spec.get("radius_mm"), f"{fld}.radius_mm", min_value=0.0, min_exclusive=True)
-    return ExitPupil(center, radius, share)
+    blocks = dict(ck.obj(raw["methods"], "methods")) if "methods" in raw else {}
+    fields = {name: f"methods.{name}" for name in blocks}
+    for legacy in ("forward", "backward"):
+        if legacy in raw:
+            if legacy in blocks:
+                ck.fail(legacy, f'give the options once, under "methods.{legacy}"')
+            blocks[legacy], fields[legacy] = raw[legacy], legacy
+    out = {}
+    for name, block in blocks.items():
+        if name not in INTEGRATORS:
+            ck.fail(fields[name], f"unknown method (known: {', '.join(INTEGRATORS)})")
+        out[name] = INTEGRATORS[name].parse_options(ck, block, fields[name], scene)
+    return out
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -454,7 +403,7 @@ def load_scene(path: str | Path) -> Scene:
     ck = FieldChecker(fname)
     ck.obj(raw, "")
     ck.keys(raw, "", {"format", "version", "eye", "objects"},
-            {"name", "description", "environment", "backward", "forward"})
+            {"name", "description", "environment", "methods", "backward", "forward"})
     if raw["format"] != FORMAT:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
     if raw["version"] != VERSION:
@@ -471,16 +420,19 @@ def load_scene(path: str | Path) -> Scene:
     for i, o in enumerate(objs_raw):
         fld = f"objects[{i}]"
         ck.obj(o, fld)
-        ck.keys(o, fld, {"name", "mesh", "material"}, {"transform", "smooth_normals"})
+        ck.keys(o, fld, {"name", "mesh", "material"}, {"transform", "smooth_normals", "emission"})
         name = ck.string(o["name"], f"{fld}.name")
         if name in names:
             ck.fail(f"{fld}.name", f"duplicate object name {json.dumps(name)}")
         if name == "eye":
             ck.fail(f"{fld}.name", '"eye" is reserved for the observer\'s pupil')
         names.add(name)
-        mat = _material(ck, o["material"], f"{fld}.material", root)
-        if mat.type == "lcd":
-            files.append(mat.params["image_file"])
+        mat, emission, emission_aim = _material(ck, o["material"], f"{fld}.material", root)
+        if "emission" in o:
+            if emission is not None:
+                ck.fail(f"{fld}.emission", 'an "emitter" material already emits: give the emission once')
+            emission, emission_aim = _emission(ck, o["emission"], f"{fld}.emission")
+        files += [v for k, v in mat.params.items() if k.endswith("_file")]
         rel = ck.string(o["mesh"], f"{fld}.mesh")
         files.append(rel)
         m = _transform(ck, o.get("transform"), f"{fld}.transform")
@@ -500,20 +452,25 @@ def load_scene(path: str | Path) -> Scene:
             vn = np.zeros_like(vw)
             for k in range(3):
                 np.add.at(vn, f[:, k], cross)
-            lengths = norm(vn)
+            lengths = np.sqrt(vn[:, 0] * vn[:, 0] + vn[:, 1] * vn[:, 1] + vn[:, 2] * vn[:, 2])
             normals = np.divide(vn, lengths[:, None], out=np.zeros_like(vn), where=lengths[:, None] > 0)
         if mat.type == "lcd" and uv is None:
             ck.fail(f"{fld}.mesh", f"{rel}: an LCD needs texture coordinates (an OBJ with vt lines)")
         lx = m[:3, :3] @ np.array([1.0, 0.0, 0.0])
-        objects.append(SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx / np.linalg.norm(lx)))
+        obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx / np.linalg.norm(lx))
+        if emission is not None:
+            obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
+        objects.append(obj)
 
     # Aim targets must exist; apertures must be planar for the solid-angle pdf to be exact.
     by_name = {o.name: o for o in objects}
-    for o in objects:
-        if o.material.aim is None:
+    aims = [(o, o.material.aim, f"objects[{o.index}].material.aim.target") for o in objects]
+    aims += [(o, o.emission.aim, f"objects[{o.index}].{'emission' if 'emission' in objs_raw[o.index] else 'material'}"
+                                 ".aim.target") for o in objects if o.emission is not None]
+    for o, aim, fld in aims:
+        if aim is None:
             continue
-        fld = f"objects[{o.index}].material.aim.target"
-        target = o.material.aim.target
+        target = aim.target
         if target == "eye":
             continue
         if target not in by_name:
@@ -526,10 +483,6 @@ def load_scene(path: str | Path) -> Scene:
         if sv[-1] > 1e-6 * max(sv[0], 1e-12):
             ck.fail(fld, f"aim target {json.dumps(target)} must be a planar mesh (a window, a lens aperture, the LCD)")
 
-    backward = _method_block(ck, raw.get("backward"), "backward", {"max_depth", "exit_pupil"})
-    if "exit_pupil" in backward:
-        backward["exit_pupil"] = _exit_pupil(ck, backward["exit_pupil"], objects, eye)
-    forward = _method_block(ck, raw.get("forward"), "forward", {"max_depth"})
     name = raw.get("name", root.name)
     if not isinstance(name, str):
         ck.fail("name", "expected a string")
@@ -539,13 +492,6 @@ def load_scene(path: str | Path) -> Scene:
     env_file = raw.get("environment", {}).get("file") if isinstance(raw.get("environment"), dict) else None
     if isinstance(env_file, str):
         files.append(env_file)
-    return Scene(root, name, desc, eye, env, objects, backward, forward, scene_hash(root, raw_bytes, files), raw)
-
-
-def emitter_luminance(obj: SceneObject) -> float:
-    """Luminance (cd/m^2) of an emitter object, from its luminance or its flux (lm) and area."""
-    p = obj.material.params
-    if "luminance" in p:
-        return p["luminance"]
-    sides = 2.0 if p["two_sided"] else 1.0
-    return lambertian_luminance_cd_m2(p["flux"], sides * obj.area_mm2)
+    scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname)
+    scene.methods = _methods(ck, raw, scene)
+    return scene

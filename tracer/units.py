@@ -24,6 +24,11 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     return c[..., 0] * Y_WEIGHTS[0] + c[..., 1] * Y_WEIGHTS[1] + c[..., 2] * Y_WEIGHTS[2]
 
 
+def luminance3(planes: np.ndarray) -> np.ndarray:
+    """Y of linear Rec.709 RGB given as (3, n) planes (or a (3,) vector); (n,), summed term by term."""
+    return planes[0] * Y_WEIGHTS[0] + planes[1] * Y_WEIGHTS[1] + planes[2] * Y_WEIGHTS[2]
+
+
 def normalize_color(rgb) -> np.ndarray:
     """Scale an RGB colour so that its luminance Y is 1 (a chromaticity carrier).
 

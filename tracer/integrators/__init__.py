@@ -4,7 +4,8 @@ Later methods (photon maps, the hybrid) register themselves the same way and app
 command line and the Blender add-on without changes there.
 """
 
+from ..film import Film
 from . import backward, forward  # noqa: F401  (registration)
-from .base import DEFAULT_BATCH, INTEGRATORS, Budget, Film, Integrator, RenderResult
+from .base import DEFAULT_BATCH, INTEGRATORS, Budget, Integrator, RenderResult
 
 __all__ = ["DEFAULT_BATCH", "INTEGRATORS", "Budget", "Film", "Integrator", "RenderResult"]

@@ -1,10 +1,23 @@
-"""Backward stochastic ray tracing from the retina (paper sec. 2, Fig. 2, eq. 3; sec. 4.2).
+"""Backward stochastic ray tracing from the retina (paper sec. 2, Fig. 2, eq. 3; sec. 4.2), with
+next-event estimation.
 
 Each batch sends ``spp`` jittered samples through every retina pixel. A sample picks a point of the
-eye pupil, follows the thin lens toward the accommodation plane, and continues through the scene:
-specular surfaces reflect or refract (Fresnel choice), the LCD modulates, diffuse surfaces scatter
-by their own law, until the path meets an emitter (its luminance is read) or escapes into the
-environment. The estimate of a pixel is the apparent luminance defined in :mod:`tracer.eye`.
+eye pupil, follows the thin lens toward the accommodation plane, and continues through the scene on
+the path loop (:mod:`tracer.integrators.path`): specular surfaces reflect or refract (Fresnel choice),
+the LCD modulates, other surfaces scatter by their own law, until the path meets an emitter (its
+luminance is read) or escapes into the environment. The estimate of a pixel is the apparent
+luminance defined in :mod:`tracer.eye`.
+
+Next-event estimation (on by default, ``methods.backward.next_event``): at every vertex with a
+non-delta lobe the path also connects to a point on a light, chosen by the light table
+(:meth:`tracer.lights.LightTable.sample_direct`: the emitting object by the BSDF toward it times its
+power over the squared distance, mixed with its power), and to the environment by its importance
+distribution, each with a shadow ray. Connections and the paths' own hits of the same lights are
+combined by multiple importance sampling with the power heuristic (Veach 1997, ch. 9,
+doi:10.5555/927297), so every light path is counted once. A specular surface between the vertex and
+the light blocks the connection: light that reaches a diffuse surface only through glass is left to
+the paths' own hits (and to the photon maps of a later release). With ``next_event: false`` the
+method is the paper's plain backward tracing.
 
 Eq. (3) stratification: the scene may designate an exit pupil, a disk P in the pupil plane. A share
 ``w`` of the samples then lands in P (its area A'_p inside the eye pupil) and the rest in the pupil
@@ -15,14 +28,21 @@ w / (1 - w).
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 
+from ..optics.bsdf import RADIANCE
 from ..sampling import uniform_disk_concentric
-from ..units import luminance
-from ..vec import dot, max3, rows
-from .base import DEFAULT_BATCH, ROULETTE_DEPTH, ROULETTE_WEIGHT, Integrator, register
+from ..schema import Field
+from ..units import luminance3
+from ..vec import dot
+from .base import DEFAULT_BATCH, MAX_DEPTH, Integrator, register
+from .path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
+
+#: Strata whose acceptance by rejection sampling would be below this are not worth stratifying.
+MIN_ACCEPTANCE = 1e-3
 
 
 def circle_overlap_area(r1: float, r2: float, d: float) -> float:
@@ -37,123 +57,240 @@ def circle_overlap_area(r1: float, r2: float, d: float) -> float:
     return a1 + a2 - k
 
 
-@register
-class BackwardTracer(Integrator):
-    name = "backward"
-    summary = "retina -> pupil -> optics -> sources (paper sec. 2, eq. 3 strata)"
+EXIT_PUPIL = Field(
+    "exit_pupil", "group", None, label="Exit pupil",
+    description="Eq. (3) strata: a disk in the pupil plane that receives a share of the samples",
+    fields=(Field("object", "object_ref", None, label="Object",
+                  description="An object whose outline, projected along the gaze, is the exit pupil"),
+            Field("center_mm", "vector2", None, unit="mm", label="Centre",
+                  description="Centre of the exit pupil in eye coordinates (right, up), mm"),
+            Field("radius_mm", "number", None, unit="mm", minimum=0.0, exclusive_min=True, label="Radius",
+                  description="Radius of the exit pupil, mm"),
+            Field("share", "number", unit="1", minimum=0.0, maximum=1.0, label="Share",
+                  description="Share of the samples sent into the exit pupil, below 1", ui_default=0.5)),
+    alternatives=(("object",), ("center_mm", "radius_mm")))
 
-    def __init__(self, scene, seed, batch_size=DEFAULT_BATCH):
-        super().__init__(scene, seed, batch_size)
-        self.max_depth = scene.backward["max_depth"]
-        npix = self.eye.width * self.eye.height
-        self.spp = max(1, self.batch_size // npix)
+
+@register
+class BackwardTracer(Integrator, PathMethod):
+    name = "backward"
+    summary = "retina -> pupil -> optics -> sources, next-event estimation (paper sec. 2, eq. 3 strata)"
+    options = (MAX_DEPTH,
+               Field("next_event", "bool", True, label="Next-event estimation",
+                     description="Connect every non-specular vertex to the lights (off: the paper's plain method)"),
+               EXIT_PUPIL)
+    components = {"hit": "samples per pixel", "connection": "samples per pixel"}
+    mode = RADIANCE
+    efficiency_definition = "retina samples whose path reached a source or a lit environment / samples"
+    found_what = "reached a source"
+
+    @classmethod
+    def check_options(cls, ck, opts, fld, scene):
+        ep = opts.get("exit_pupil")
+        if ep is None:
+            return
+        f = f"{fld}.exit_pupil"
+        if ep["share"] >= 1.0:
+            ck.fail(f"{f}.share", "must be < 1: the rest of the pupil keeps samples (unbiasedness)")
+        if "object" in ep:
+            matches = [o for o in scene.objects if o.name == ep["object"]]
+            if not matches:
+                ck.fail(f"{f}.object", f"no object named {json.dumps(ep['object'])}")
+            # Project the object's vertices along the gaze onto the pupil plane (eye coordinates).
+            eye = scene.eye
+            right = np.cross(eye.gaze, eye.up)
+            right /= np.linalg.norm(right)
+            upv = np.cross(right, eye.gaze)
+            rel = matches[0].vertices - eye.position
+            xy = np.stack([rel @ right, rel @ upv], axis=1)
+            center = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
+            ep["center_mm"], ep["radius_mm"] = center, float(np.linalg.norm(xy - center, axis=1).max())
+
+    def __init__(self, world, seed, batch_size=DEFAULT_BATCH, options=None):
+        super().__init__(world, seed, batch_size, options)
+        w = self.world
+        self.next_event = bool(self.opts["next_event"])
+        self.lights = w.lights
+        self.env = w.environment
+        self.nee_lights = self.next_event and len(self.lights) > 0
+        self.nee_env = self.next_event and not self.env.is_black
+        self.max_luminance = w.max_luminance
+        self.npix = self.eye.width * self.eye.height
         self.strata = None
-        ep = scene.backward.get("exit_pupil")
+        ep = self.opts.get("exit_pupil")
         a = self.eye.pupil_radius
-        if ep is not None and ep.share > 0:
-            dist = float(np.linalg.norm(ep.center_mm))
-            inside = circle_overlap_area(a, ep.radius_mm, dist)
-            if inside <= 0:
-                self.warnings.append("backward.exit_pupil lies outside the eye pupil: stratification ignored")
+        if ep is not None and ep["share"] > 0:
+            center, radius = np.asarray(ep["center_mm"], dtype=np.float64), float(ep["radius_mm"])
+            inside = circle_overlap_area(a, radius, float(np.linalg.norm(center)))
+            rest = self.eye.pupil_area - inside
+            small = min(a, radius)
+            if inside < MIN_ACCEPTANCE * math.pi * small * small:
+                self.warnings.append("methods.backward.exit_pupil lies (almost) outside the eye pupil: "
+                                     "stratification ignored")
+            elif rest < MIN_ACCEPTANCE * self.eye.pupil_area:
+                self.warnings.append("methods.backward.exit_pupil covers the eye pupil: every sample is in it, "
+                                     "stratification ignored")
             else:
-                rest = self.eye.pupil_area - inside
-                # A stop that covers the whole pupil leaves no second stratum: all samples go to it.
-                share = ep.share if rest > 1e-12 * self.eye.pupil_area else 1.0
-                self.strata = (ep.center_mm, ep.radius_mm, share, inside, max(rest, 0.0))
+                self.strata = (center, radius, float(ep["share"]), inside, rest)
+
+    # -- camera rays -----------------------------------------------------------------------------
+    def _disk_part(self, rng, n: int, center: np.ndarray, radius: float, inside: bool) -> np.ndarray:
+        """n uniform points (2, n) of the pupil intersected with (``inside``) or minus the disk
+        (``center``, ``radius``): rejection from the smaller of the two disks (or from the pupil),
+        drawing enough candidates per round that one or two rounds suffice."""
+        a = self.eye.pupil_radius
+        from_stop = inside and radius < a
+        area = math.pi * (radius if from_stop else a) ** 2
+        target = self.strata[3] if inside else self.strata[4]
+        accept = target / area
+        out = np.empty((2, 0))
+        while out.shape[1] < n:
+            k = int((n - out.shape[1]) / accept * 1.2) + 16
+            cand = uniform_disk_concentric(rng.random((2, k)))
+            cand = center[:, None] + radius * cand if from_stop else a * cand
+            in_pupil = cand[0] * cand[0] + cand[1] * cand[1] <= a * a
+            dx, dy = cand[0] - center[0], cand[1] - center[1]
+            in_stop = dx * dx + dy * dy <= radius * radius
+            ok = (in_pupil & in_stop) if inside else ~in_stop
+            out = np.concatenate([out, cand[:, ok]], axis=1)
+        return out[:, :n]
 
     def lens_samples(self, rng: np.random.Generator, n: int):
-        """Pupil points (n, 2) in eye coordinates (mm) and their area weights (n,) (mm^2): the pupil
+        """Pupil points (2, n) in eye coordinates (mm) and their area weights (n,) (mm^2): the pupil
         area for plain sampling, or stratum area / stratum probability with eq. (3) strata."""
         a = self.eye.pupil_radius
         if self.strata is None:
-            return a * uniform_disk_concentric(rng.random((n, 2))), np.full(n, self.eye.pupil_area)
-        c, r, share, area_p, area_rest = self.strata
+            return a * uniform_disk_concentric(rng.random((2, n))), np.full(n, self.eye.pupil_area)
+        center, radius, share, area_p, area_rest = self.strata
         in_p = rng.random(n) < share
-        xy = np.empty((n, 2))
-        todo = np.arange(n)
-        while len(todo):  # rejection: P from its own disk, the rest from the pupil
-            ip = in_p[todo]
-            cand = uniform_disk_concentric(rng.random((len(todo), 2)))
-            cand = np.where(ip[:, None], c + r * cand, a * cand)
-            in_pupil = dot(cand, cand) <= a * a
-            in_stop = dot(cand - c, cand - c) <= r * r
-            ok = np.where(ip, in_pupil, ~in_stop)
-            xy[todo[ok]] = cand[ok]
-            todo = todo[~ok]
-        weight = np.where(in_p, area_p / share, area_rest / (1.0 - share) if area_rest > 0 else 0.0)
-        return xy, weight
+        k = int(in_p.sum())
+        xy = np.empty((2, n))
+        xy[:, in_p] = self._disk_part(rng, k, center, radius, True)
+        xy[:, ~in_p] = self._disk_part(rng, n - k, center, radius, False)
+        return xy, np.where(in_p, area_p / share, area_rest / (1.0 - share))
 
-    def run_batch(self, rng, film):
-        eye, accel, env = self.eye, self.accel, self.scene.environment
+    def camera_paths(self, rng: np.random.Generator, pix: np.ndarray, rep: np.ndarray) -> PathState:
+        """One sample through each of the pixels ``pix`` (n,), in replicates ``rep`` (n,)."""
+        eye = self.eye
         w, h = eye.width, eye.height
-        pix = np.tile(np.arange(w * h), self.spp)
         n = len(pix)
-        jit = rng.random((n, 2))
-        sx = (2 * ((pix % w) + jit[:, 0]) / w - 1) * eye.half_x
-        sy = (1 - 2 * ((pix // w) + jit[:, 1]) / h) * eye.half_y
+        jit = rng.random((2, n))
+        sx = (2 * ((pix % w) + jit[0]) / w - 1) * eye.half_x
+        sy = (1 - 2 * ((pix // w) + jit[1]) / h) * eye.half_y
         lens, lens_weight = self.lens_samples(rng, n)
-        origins, dirs, geo = eye.generate_rays(sx, sy, lens)
-        thr = np.repeat((geo * eye.pixel_area * lens_weight / eye.extent[pix])[:, None], 3, axis=1)
-        radiance = np.zeros((n, 3))
-        found = np.zeros(n, bool)
-        idx = np.arange(n)
-        if accel is None:  # nothing but the environment
-            self.rays_without_geometry += n
-            radiance += thr * env.radiance(dirs)
-            found |= luminance(radiance) > 0
-            idx = idx[:0]
-        for depth in range(self.max_depth):
-            if len(idx) == 0:
-                break
-            hits = accel.intersect(origins, dirs)
-            miss = ~hits.hit
-            if np.any(miss) and not env.is_black:
-                le = env.radiance(dirs[miss])
-                radiance[idx[miss]] += thr[miss] * le
-                found[idx[miss]] |= luminance(le) > 0
-            next_o, next_d, next_t, next_i = [], [], [], []
-            for slot, sel in hits.by_object():
-                surf = self.surfaces[slot]
-                it = self.interaction(slot, hits, sel, dirs)
-                if surf.emits:
-                    le = surf.emitted(it)
-                    radiance[idx[sel]] += thr[sel] * le
-                    found[idx[sel]] |= luminance(le) > 0
-                if surf.terminal:
-                    continue
-                d_out, factor, alive = surf.scatter(it, rng, radiance=True)
-                t_new = rows(thr, sel) * factor
-                alive &= max3(t_new) > 0
-                if depth >= ROULETTE_DEPTH:
-                    q = np.clip(max3(t_new) / ROULETTE_WEIGHT, 0.0, 1.0)
-                    survive = rng.random(len(sel)) < q
-                    alive &= survive
-                    t_new = t_new / np.where(alive, q, 1.0)[:, None]
-                keep = np.nonzero(alive)[0]
-                d_keep = rows(d_out, keep)
-                next_o.append(accel.spawn(rows(it.p, keep), rows(it.ng, keep), d_keep))
-                next_d.append(d_keep)
-                next_t.append(rows(t_new, keep))
-                next_i.append(idx[sel[keep]])
-            if not next_i:
-                idx = np.zeros(0, np.int64)
-                break
-            origins, dirs = np.concatenate(next_o), np.concatenate(next_d)
-            thr, idx = np.concatenate(next_t), np.concatenate(next_i)
-        self.truncated += len(idx)
-        contributing = np.nonzero(max3(radiance) > 0)[0]
-        film.add(pix[contributing], radiance[contributing])
-        film.samples += self.spp
-        return n, int(found.sum())
+        o, d, geo = eye.generate_rays(sx, sy, lens)
+        beta = np.broadcast_to(geo * eye.pixel_area * lens_weight / eye.extent[pix], (3, n)).copy()
+        return PathState(o, d, beta, pix, rep, np.zeros(n), np.ones(n, bool), {"sample": np.arange(n)})
+
+    def _run(self, ctx, pix, rep) -> int:
+        state = self.camera_paths(ctx.rng, pix, rep)
+        ctx.sample_found = np.zeros(len(pix), bool)
+        self.truncated += trace(self, state, ctx, self.max_depth)
+        return int(ctx.sample_found.sum())
+
+    def run_batch(self, ctx):
+        spp = max(1, self.batch_size // self.npix)
+        pix = np.tile(np.arange(self.npix), spp)
+        rep = np.repeat(np.arange(spp), self.npix)
+        found = self._run(ctx, pix, rep)
+        return len(pix), found, {"hit": spp, "connection": spp}, spp
+
+    def pilot_mean(self, ctx) -> float:
+        """The image's mean luminance (cd/m^2) from one sample at each of ``batch_size`` random pixels."""
+        n = self.batch_size
+        pix = ctx.rng.integers(0, self.npix, n)
+        self._run(ctx, pix, np.zeros(n, np.int64))
+        total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)
+        return total / n
+
+    # -- hooks of the path loop --------------------------------------------------------------------
+    def _add(self, ctx, component: str, owner, rep, sample, value):
+        lit = np.flatnonzero(luminance3(value) > 0)
+        if len(lit):
+            ctx.splats.add(component, owner[lit], rep[lit], np.take(value, lit, axis=1))
+            ctx.sample_found[sample[lit]] = True
+
+    @staticmethod
+    def _power_heuristic(p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
+        a2, b2 = p_a * p_a, p_b * p_b
+        s = a2 + b2
+        return np.where(s > 0, a2 / np.where(s > 0, s, 1.0), 0.0)
+
+    def escaped(self, state, ctx):
+        if self.env.is_black:
+            return
+        value = state.beta * self.env.radiance(state.d)
+        if self.nee_env:
+            value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, self.env.pdf(state.d)))
+        self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
+
+    def emitted(self, state, tri, p, t, ctx):
+        value = state.beta * self.lights.emitted(tri, state.d)
+        if self.nee_lights:
+            cos_y = np.abs(dot(state.d, np.take(self.lights.tris.normal, tri, axis=1)))
+            p_light = self.lights.pdf_power_area(tri) * t * t / np.maximum(cos_y, 1e-300)
+            value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, p_light))
+        self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
+
+    def connect(self, state, it, bsdf, ctx):
+        if not self.next_event:
+            return None
+        m = len(state)
+        parts = []
+        rng = ctx.rng
+        accel = self.world.accel
+        data = lambda ok: {"owner": state.owner[ok], "rep": state.rep[ok], "sample": state.extra["sample"][ok]}  # noqa: E731
+        if self.nee_lights:
+            lights = self.lights
+            imp = lights.importance(it.p, lambda w: bsdf.eval(it, w, RADIANCE))
+            tri, y, pdf_area = lights.sample_direct(it.p, rng.random((3, m)), imp)
+            w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
+            f = bsdf.eval(it, w, RADIANCE)
+            p_light = lights.pdf_power_area(tri) * dist * dist / np.maximum(cos_y, 1e-300)
+            mis = self._power_heuristic(p_light, bsdf.pdf(it, w))
+            g = cos_y / np.maximum(dist * dist * pdf_area, 1e-300)
+            value = state.beta * f * radiance * (g * mis)
+            ok = np.flatnonzero(luminance3(value) > 0)
+            if len(ok):
+                o, d, tmax = segment_to(accel, np.take(it.p, ok, axis=1), np.take(it.ng, ok, axis=1),
+                                        np.take(y, ok, axis=1))
+                parts.append(Shadow(o, d, tmax, np.take(value, ok, axis=1), data(ok)))
+        if self.nee_env:
+            w, radiance, p_env = self.env.sample(rng.random((2, m)))
+            f = bsdf.eval(it, w, RADIANCE)
+            mis = self._power_heuristic(p_env, bsdf.pdf(it, w))
+            value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))
+            ok = np.flatnonzero(luminance3(value) > 0)
+            if len(ok):
+                w_ok = np.take(w, ok, axis=1)
+                o = accel.spawn(np.take(it.p, ok, axis=1), np.take(it.ng, ok, axis=1), w_ok)
+                parts.append(Shadow(o, w_ok, np.full(len(ok), np.inf), np.take(value, ok, axis=1), data(ok)))
+        return Shadow.concat(parts) if parts else None
+
+    def deliver(self, shadow, visible, ctx):
+        k = np.flatnonzero(visible)
+        if len(k):
+            d = shadow.data
+            self._add(ctx, "connection", d["owner"][k], d["rep"][k], d["sample"][k], np.take(shadow.value, k, axis=1))
+
+    def continue_paths(self, state, it, bsdf, ctx):
+        return continue_by_sampling(state, it, bsdf, ctx, RADIANCE)
+
+    def potential(self, state):
+        """A camera path adds at most its weight times the brightest source, over the batch's samples
+        per pixel."""
+        return luminance3(state.beta) * self.max_luminance / max(1, self.batch_size // self.npix)
 
     def finish(self, result):
         super().finish(result)
-        result.extra["samples_per_pixel"] = result.film.samples
+        result.extra["samples_per_pixel"] = result.film.norm.get("hit", 0)
+        result.extra["next_event"] = self.next_event
+        film = result.film
+        total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)
+        if self.next_event and total > 0:
+            result.extra["connection_share"] = float(luminance3(film.sums["connection"]).sum()) / total
         if self.strata is not None:
             c, r, share, area_p, area_rest = self.strata
             result.extra["exit_pupil"] = {"center_mm": [float(c[0]), float(c[1])], "radius_mm": r, "share": share,
                                           "area_inside_pupil_mm2": area_p, "area_rest_mm2": area_rest,
                                           "paper_w": share / (1 - share)}
-        if result.paths and self.truncated / result.paths > 1e-3:
-            result.warnings.append(f"{self.truncated:,} paths were cut at backward.max_depth = {self.max_depth}: "
-                                   "the image is biased low; raise max_depth")

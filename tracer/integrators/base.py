@@ -1,42 +1,45 @@
-"""What every light-transport method shares: the film, the budget, the batch loop, the report data.
+"""What every light-transport method shares: options, the budget, the batch driver, the report data.
 
-A method is a subclass of :class:`Integrator` registered by name (:func:`register`). It renders in
-seed-addressed batches: batch k draws its random numbers from ``make_rng(seed, k)`` only, and its
-results are added to a :class:`Film` whose sums merge exactly, so the same seeds give the same image
-however batches are distributed (over processes, later over machines). Progress and cancellation
-cross into the tracer as two callables, ``progress(fraction, message)`` and ``should_stop()``,
-checked once per batch.
+A method is a subclass of :class:`Integrator` registered by name (:func:`register`). It declares its
+scene.json options as a schema (``options``, validated by :meth:`Integrator.parse_options`, exposed by
+the Blender add-on), its film components, and traces one batch at a time on the path loop
+(:mod:`tracer.integrators.path`) over a render world (:class:`tracer.world.World`).
+
+Batches are seed-addressed: batch k draws its random numbers from ``make_rng(seed, k)`` only and
+fills its own film, whose sums merge exactly, so the same seeds give the same image however batches
+are distributed (over processes, over machines). Progress and cancellation cross into the tracer as
+two callables, ``progress(fraction, message)`` and ``should_stop()``, checked between batches.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..accel import Accelerator
-from ..apertures import DiskTarget, MeshTarget
-from ..eye import ThinLensEye
-from ..optics.surfaces import Interaction, Surface, make_surface
+from ..film import Film, Splats
 from ..sampling import make_rng
-from ..scene import Scene
-from ..units import luminance
-from ..vec import dot, norm, rows
+from ..schema import Field, parse_block
+from ..validate import FieldChecker
+from ..world import World
+from .path import Context, Roulette, Timers
 
 #: Rays per batch (structure of arrays, one Embree call per bounce).
 DEFAULT_BATCH = 1 << 17
-
-#: Russian roulette (Arvo & Kirk 1990, doi:10.1145/97880.97886) starts at this depth and only for
-#: paths whose weight fell below this fraction of where it started, surviving with probability
-#: weight / ROULETTE_WEIGHT. A plain "survive with the weight" rule would turn the LCD's 5 %
-#: transmission into 20x fireflies on every later windshield bounce (the ghost image).
-ROULETTE_DEPTH = 6
-ROULETTE_WEIGHT = 1e-5
+#: The random stream of a method's pilot (the roulette's reference luminance): (seed, PILOT_STREAM).
+PILOT_STREAM = 2**31 - 1
+#: Paths in a pilot.
+PILOT_PATHS = 1 << 14
 
 Progress = Callable[[float, str], None]
 ShouldStop = Callable[[], bool]
+
+#: The option every method has.
+MAX_DEPTH = Field("max_depth", "int", 32, minimum=1, maximum=1000, label="Max depth",
+                  description="Longest path in ray segments; paths cut there are counted and reported")
 
 
 @dataclass
@@ -51,8 +54,8 @@ class Budget:
             raise ValueError("a budget needs rays or seconds")
         if self.rays is not None and self.rays <= 0:
             raise ValueError("rays must be positive")
-        if self.seconds is not None and self.seconds <= 0:
-            raise ValueError("seconds must be positive")
+        if self.seconds is not None and not (self.seconds > 0 and math.isfinite(self.seconds)):
+            raise ValueError("seconds must be positive and finite")
 
     def fraction(self, rays: int, seconds: float) -> float:
         parts = []
@@ -63,47 +66,19 @@ class Budget:
         return min(1.0, max(parts))
 
 
-class Film:
-    """Per-pixel sums of a Monte Carlo estimator of apparent luminance (cd/m^2).
+@dataclass
+class BatchResult:
+    """One traced batch: its film's arrays and its figures (what workers send back)."""
 
-    The estimate of pixel i is ``sum_rgb[i] / samples``: ``samples`` counts independent primary
-    samples per pixel (backward) or particles emitted (forward); every sample adds its value to one
-    pixel at most. ``sum_y2`` holds the sum of squared luminance values for the variance of the mean.
-    """
-
-    def __init__(self, width: int, height: int):
-        self.width, self.height = width, height
-        n = width * height
-        self.sum_rgb = np.zeros((n, 3))
-        self.sum_y2 = np.zeros(n)
-        self.samples = 0
-
-    def add(self, pixels: np.ndarray, values: np.ndarray):
-        """Add sample values (m, 3) RGB cd/m^2 to flat pixel indices (m,)."""
-        if len(pixels) == 0:
-            return
-        n = self.width * self.height
-        for c in range(3):
-            self.sum_rgb[:, c] += np.bincount(pixels, weights=values[:, c], minlength=n)
-        y = luminance(values)
-        self.sum_y2 += np.bincount(pixels, weights=y * y, minlength=n)
-
-    def merge(self, other: Film):
-        self.sum_rgb += other.sum_rgb
-        self.sum_y2 += other.sum_y2
-        self.samples += other.samples
-
-    def rgb(self) -> np.ndarray:
-        """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2."""
-        s = max(self.samples, 1)
-        return (self.sum_rgb / s).reshape(self.height, self.width, 3)
-
-    def variance_y(self) -> np.ndarray:
-        """(H, W) variance of the pixel's mean luminance, (cd/m^2)^2."""
-        s = max(self.samples, 1)
-        mean_y = luminance(self.sum_rgb) / s
-        var = np.maximum(self.sum_y2 / s - mean_y**2, 0.0) / s
-        return var.reshape(self.height, self.width)
+    index: int
+    film: tuple
+    paths: int
+    found: int
+    rays: int
+    truncated: int
+    seconds: float
+    stages: dict
+    extra: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -121,6 +96,7 @@ class RenderResult:
     batches: int
     warnings: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    stages: dict = field(default_factory=dict)
 
     @property
     def efficiency(self) -> float:
@@ -142,159 +118,228 @@ def register(cls):
 
 
 class Integrator:
-    """Base of all methods. Subclasses implement :meth:`run_batch`."""
+    """Base of all methods. Subclasses set ``name``, ``summary``, ``options``, ``components`` and
+    implement :meth:`run_batch`.
+
+    Parameters
+    ----------
+    world : the render world (or a Scene, from which one is built).
+    seed : the user's seed. batch_size : paths per batch. options : validated options (default:
+    the scene's own for this method).
+    """
 
     name = ""
     summary = ""
+    #: scene.json options of the method (tracer.schema fields), under "methods.<name>".
+    options: tuple[Field, ...] = (MAX_DEPTH,)
+    #: Film components: name -> what normalises it.
+    components: dict[str, str] = {}
+    #: What "efficiency" counts, for the report.
+    efficiency_definition = ""
 
-    def __init__(self, scene: Scene, seed: int, batch_size: int = DEFAULT_BATCH):
-        self.scene = scene
+    def __init__(self, world, seed: int, batch_size: int = DEFAULT_BATCH, options: dict | None = None):
+        if not isinstance(world, World):
+            world = World(world)
+        self.world = world
+        self.scene = world.scene
+        self.eye = world.eye
         self.seed = int(seed)
         self.batch_size = int(batch_size)
-        self.eye = ThinLensEye(scene.eye)
-        self.objects = scene.traced_objects
-        self.surfaces: list[Surface] = [make_surface(o) for o in self.objects]
-        self.accel = Accelerator([(o.vertices, o.faces) for o in self.objects]) if self.objects else None
+        self.opts = options if options is not None else self.scene.method_options(self.name)
+        self.max_depth = self.opts["max_depth"]
         self.warnings: list[str] = []
-        self.rays_without_geometry = 0  # rays of a scene with no geometry: they all escape
-        self.truncated = 0  # paths cut at max_depth (a bias the report warns of)
-        self._targets: dict[str, DiskTarget | MeshTarget] = {}
+        self.truncated = 0
+        self._reference = None
 
-    # -- helpers shared by the methods ---------------------------------------------------------
-    def target(self, name: str):
-        """The aiming target "eye" (the pupil disk) or a named planar object."""
-        if name not in self._targets:
-            if name == "eye":
-                self._targets[name] = DiskTarget(self.eye.position, self.eye.gaze, self.eye.pupil_radius)
-            else:
-                self._targets[name] = MeshTarget(self.scene.object(name).triangles)
-        return self._targets[name]
+    # -- options ---------------------------------------------------------------------------------
+    @classmethod
+    def parse_options(cls, ck: FieldChecker, block, fld: str, scene) -> dict:
+        """Validate the method's scene.json block (None: all defaults); subclasses add checks that
+        need the scene (objects, eye) in :meth:`check_options`."""
+        opts = parse_block(ck, block, fld, cls.options, scene.root)
+        cls.check_options(ck, opts, fld, scene)
+        return opts
 
-    def interaction(self, slot: int, hits, idx: np.ndarray, dirs: np.ndarray) -> Interaction:
-        """Surface data for rays ``idx`` that hit object ``slot``: shading normals and UVs are
-        interpolated from the vertices with the hits' barycentrics (computed only for objects that
-        have vertex normals or texture coordinates)."""
-        obj = self.objects[slot]
-        ng = rows(hits.normals, idx)
-        ns, uv = ng, None
-        if obj.normals is not None or obj.uv is not None:
-            face = obj.faces[hits.face[idx]]
-            bary = hits.bary(idx)
-            u, v = bary[:, 0], bary[:, 1]
-            w0 = 1.0 - u - v
-            if obj.normals is not None:
-                nv = obj.normals
-                ns = w0[:, None] * nv[face[:, 0]] + u[:, None] * nv[face[:, 1]] + v[:, None] * nv[face[:, 2]]
-                ns /= np.maximum(norm(ns), 1e-300)[:, None]
-                ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
-            if obj.uv is not None:
-                t = obj.uv
-                uv = w0[:, None] * t[face[:, 0]] + u[:, None] * t[face[:, 1]] + v[:, None] * t[face[:, 2]]
-        return Interaction(rows(dirs, idx), rows(hits.points, idx), ng, ns, uv)
+    @classmethod
+    def check_options(cls, ck: FieldChecker, opts: dict, fld: str, scene):
+        """Checks across options or against the scene; may derive values (default: none)."""
 
-    @property
-    def rays_traced(self) -> int:
-        n = self.accel.rays_traced if self.accel else self.rays_without_geometry
-        return n + sum(t._accel.rays_traced for t in self._targets.values() if isinstance(t, MeshTarget))
-
-    # -- the batch loop ----------------------------------------------------------------------------
-    def run_batch(self, rng: np.random.Generator, film: Film) -> tuple[int, int]:
-        """Trace one batch into ``film``; return (paths, paths that found light)."""
+    # -- the batch -------------------------------------------------------------------------------
+    def run_batch(self, ctx: Context) -> tuple[int, int, dict[str, int], int]:
+        """Trace one batch into ``ctx.splats``; return (paths, paths that found light, the batch's
+        normaliser total per component, number of replicates)."""
         raise NotImplementedError
 
-    def trace_batch(self, index: int) -> tuple:
-        """Trace batch ``index`` into a film of its own: (index, sum_rgb, sum_y2, samples, paths,
-        found, rays, truncated), what :func:`drive` merges, in this process or in a worker."""
-        film = Film(self.eye.width, self.eye.height)
-        rays_before, truncated_before = self.rays_traced, self.truncated
-        paths, found = self.run_batch(make_rng(self.seed, index), film)
-        return (index, film.sum_rgb, film.sum_y2, film.samples, paths, found, self.rays_traced - rays_before,
-                self.truncated - truncated_before)
+    def pilot_mean(self, ctx: Context) -> float:
+        """An unbiased estimate of the image's mean luminance (cd/m^2) from a pilot batch of
+        ``batch_size`` = :data:`PILOT_PATHS` paths traced without roulette into ``ctx``."""
+        raise NotImplementedError
+
+    @property
+    def reference_luminance(self) -> float:
+        """The roulette's reference (cd/m^2): the image's mean luminance estimated by a pilot of
+        :data:`PILOT_PATHS` paths without roulette, on the seed's own pilot stream (the same in every
+        process, so batches stay seed-addressed)."""
+        if self._reference is None:
+            saved, truncated = self.batch_size, self.truncated
+            self.batch_size = PILOT_PATHS
+            rays0 = self.world.rays_traced
+            try:
+                ctx = Context(self.world, make_rng(self.seed, PILOT_STREAM), Timers(), Splats(), None)
+                self._reference = self.pilot_mean(ctx)
+            finally:
+                self.batch_size, self.truncated = saved, truncated
+            self.pilot_rays = self.world.rays_traced - rays0
+        return self._reference
+
+    def trace_batch(self, index: int) -> BatchResult:
+        """Trace batch ``index`` into a film of its own: what :func:`drive` merges, in this process or
+        in a worker."""
+        reference = self.reference_luminance
+        t0 = time.perf_counter()
+        timers = Timers()
+        ctx = Context(self.world, make_rng(self.seed, index), timers, Splats(), Roulette(reference))
+        rays_before, truncated_before = self.world.rays_traced, self.truncated
+        paths, found, norms, reps = self.run_batch(ctx)
+        with timers("film"):
+            film = Film(self.eye.width, self.eye.height, self.components)
+            film.record_batch(ctx.splats, reps, norms)
+        seconds = time.perf_counter() - t0
+        return BatchResult(index, film.arrays(), paths, found, self.world.rays_traced - rays_before,
+                           self.truncated - truncated_before, seconds, timers.report(seconds), dict(ctx.store))
 
     def render(self, budget: Budget, progress: Progress | None = None,
                should_stop: ShouldStop | None = None) -> RenderResult:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
-        return drive(self, budget, lambda k: _Done(self.trace_batch(k)), 1, progress, should_stop)
+        return drive(self, budget, LocalExecutor(self), 1, progress, should_stop)
+
+    def merge_extra(self, total: dict, batch: dict):
+        """Fold a batch's ``extra`` figures into the render's (default: add numbers)."""
+        for k, v in batch.items():
+            total[k] = total.get(k, 0) + v
 
     def finish(self, result: RenderResult):
         """Add method-specific warnings and figures to a finished result."""
+        result.extra["roulette"] = {"reference_luminance_cd_m2": self.reference_luminance,
+                                    "threshold_cd_m2": Roulette(self.reference_luminance).threshold,
+                                    "pilot_rays": self.pilot_rays}
         if result.found == 0:
             result.warnings.append(
                 f"no light path found: {result.method} traced {result.paths:,} paths ({result.rays:,} rays) and "
-                f"none reached {'the retina' if result.method == 'forward' else 'a source'} "
-                f"(efficiency {result.efficiency:.3g}); the image is black because the method failed, "
-                "not because the scene is dark")
+                f"none {self.found_what} (efficiency {result.efficiency:.3g}); the image is black because the "
+                "method failed, not because the scene is dark")
         elif result.found < 100:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
+        if result.paths and self.truncated / result.paths > 1e-3:
+            result.warnings.append(f"{self.truncated:,} paths were cut at methods.{self.name}.max_depth = "
+                                   f"{self.max_depth}: the image is biased low; raise max_depth")
+
+    found_what = "found light"
 
 
-class _Done:
-    """A batch traced in this process, with the interface of a pending task."""
+class LocalExecutor:
+    """Batches traced in this process, one at a time, when the driver asks for them."""
 
-    def __init__(self, value):
-        self._value = value
+    def __init__(self, integrator: Integrator):
+        self.integrator = integrator
 
-    def done(self) -> bool:
-        return True
+    def submit(self, index: int):
+        return index
 
-    def result(self):
-        return self._value
+    def wait(self, handles: dict, timeout: float | None) -> list[int]:
+        k = min(handles)
+        handles[k] = self.integrator.trace_batch(k)
+        return [k]
+
+    def result(self, handle):
+        return handle
 
 
-def drive(local: Integrator, budget: Budget, submit, in_flight: int, progress: Progress | None = None,
+def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress: Progress | None = None,
           should_stop: ShouldStop | None = None, label: str = "") -> RenderResult:
-    """Hand out batch indices in increasing order through ``submit(k)`` (which returns an object with
-    ``done()`` and ``result()``, the tuple of :meth:`Integrator.trace_batch`), keep at most
+    """Hand out batch indices in increasing order to ``executor`` (``submit(k)`` -> handle,
+    ``wait(handles, timeout)`` -> indices done, ``result(handle)`` -> BatchResult), keep at most
     ``in_flight`` running, and merge the contiguous prefix of finished batches in batch order until
     the budget is met. Each batch fills its own film and films are added in batch order, so one
-    process, several, or a cluster give the same image for a budget in rays."""
+    process, several, or a cluster give the same image for a budget in rays.
+
+    No batch is issued that cannot land within the budget: with a budget in seconds, none once the
+    time left is shorter than a batch takes; with a budget in rays, none beyond the rays that the
+    merged and running batches will already bring (estimated from the finished ones). When the
+    budget is met, batches still running are dropped, not awaited."""
     method = f"{local.name} {label}" if label else local.name
-    done: dict[int, tuple] = {}
+    done: dict[int, BatchResult] = {}
     pending: dict[int, object] = {}
-    film = Film(local.eye.width, local.eye.height)
+    film = Film(local.eye.width, local.eye.height, local.components)
     rays = paths = found = truncated = merged = next_index = 0
-    first = (0.0, 0)  # (seconds, rays) when the first batch was merged: start-up and warm-up end there
+    stages = Timers()
+    extra: dict = {}
+    batch_seconds: list[float] = []
+    batch_rays: list[int] = []
+    first = (0.0, 0)  # (seconds, rays) when the first batch was merged
     partial = False
     start = time.perf_counter()
+
+    workers = getattr(executor, "workers", 1)
+
+    def worth_issuing() -> bool:
+        if not batch_seconds:
+            return next_index < in_flight
+        if budget.seconds is not None:
+            # A batch issued now starts when the ones ahead of it have run on ``workers`` processes.
+            finish = (time.perf_counter() - start) + float(np.median(batch_seconds)) * (len(pending) // workers + 1)
+            if finish > budget.seconds:
+                return False
+        if budget.rays is not None:
+            coming = rays + sum(b.rays for b in done.values()) + len(pending) * float(np.median(batch_rays))
+            return coming < budget.rays
+        return True
+
     while True:
-        budget_met = budget.fraction(rays, time.perf_counter() - start) >= 1.0
-        if should_stop is not None and not budget_met and should_stop():
+        elapsed = time.perf_counter() - start
+        if budget.fraction(rays, elapsed) >= 1.0:
+            break  # batches still in flight would land beyond the budget: dropped, not awaited
+        if should_stop is not None and should_stop():
             partial = True
             break
-        if budget_met:
-            break  # batches still in flight would land beyond the budget: dropped, not awaited
-        while len(pending) < in_flight:
-            pending[next_index] = submit(next_index)
+        while len(pending) < in_flight and worth_issuing():
+            pending[next_index] = executor.submit(next_index)
             next_index += 1
-        finished = [k for k, f in pending.items() if f.done()]
-        if not finished:
-            time.sleep(0.002)
-            continue
-        for k in finished:
-            done[k] = pending.pop(k).result()
+        if not pending:
+            if budget.seconds is not None and budget.rays is None:
+                break  # no batch can finish within the time left
+            pending[next_index] = executor.submit(next_index)
+            next_index += 1
+        left = None if budget.seconds is None else max(0.0, budget.seconds - (time.perf_counter() - start))
+        timeout = 0.25 if left is None else min(0.25, left + 1e-3)
+        for k in executor.wait(pending, timeout):
+            done[k] = executor.result(pending.pop(k))
+            batch_seconds.append(done[k].seconds)
+            batch_rays.append(done[k].rays)
         while merged in done and budget.fraction(rays, time.perf_counter() - start) < 1.0:
-            _, s_rgb, s_y2, samples, p, f, r, t = done.pop(merged)
-            film.sum_rgb += s_rgb
-            film.sum_y2 += s_y2
-            film.samples += samples
-            paths, found, rays, truncated = paths + p, found + f, rays + r, truncated + t
+            b = done.pop(merged)
+            film.merge_arrays(b.film)
+            paths, found, rays, truncated = paths + b.paths, found + b.found, rays + b.rays, truncated + b.truncated
+            stages.add(b.stages)
+            local.merge_extra(extra, b.extra)
             merged += 1
             if merged == 1:
                 first = (time.perf_counter() - start, rays)
             if progress is not None:
-                elapsed = time.perf_counter() - start
+                el = time.perf_counter() - start
                 eff = found / paths if paths else 0.0
-                progress(budget.fraction(rays, elapsed),
-                         f"{method}: {rays:,} rays, efficiency {eff:.2e}, {elapsed:.1f} s")
+                progress(budget.fraction(rays, el), f"{method}: {rays:,} rays, efficiency {eff:.2e}, {el:.1f} s")
         if rays == 0 and merged > 0:
             break  # nothing to trace (no source, no geometry): more batches cannot help
-    result = RenderResult(local.name, local.seed, film, rays, paths, found, time.perf_counter() - start, partial,
-                          merged, list(local.warnings))
-    if merged > 1 and result.seconds > first[0]:
-        result.extra["steady_rays_per_second"] = (rays - first[1]) / (result.seconds - first[0])
+    seconds = time.perf_counter() - start
+    result = RenderResult(local.name, local.seed, film, rays, paths, found, seconds, partial, merged,
+                          list(local.warnings), dict(extra))
+    result.stages = {k: float(v) for k, v in stages.seconds.items()}
+    if merged > 1 and seconds > first[0]:
+        result.extra["steady_rays_per_second"] = (rays - first[1]) / (seconds - first[0])
     local.truncated = truncated
     local.finish(result)
     return result

@@ -3,18 +3,14 @@
 Fresnel equations for unpolarised light, R = (R_s + R_p) / 2 with
 r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), r_p = (n2 cos_i - n1 cos_t) / (n2 cos_i + n1 cos_t)
 (Born & Wolf, Principles of Optics, 7th ed., sec. 1.5.2, doi:10.1017/CBO9781139644181).
+Vectors are (3, n) planes (:mod:`tracer.vec`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..vec import axpy, dot, normalize
-
-
-def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Mirror direction of ``d`` (n, 3) about normals ``n`` (n, 3); either side of the normal."""
-    return axpy(-2.0 * dot(d, n), n, d)
+from ..vec import normalize, reflect  # noqa: F401  (reflect is part of this module's interface)
 
 
 def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
@@ -31,7 +27,7 @@ def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
     cos_t : (n,) cosine of the refraction angle (0 under total internal reflection).
     """
     cos_i = np.clip(cos_i, 0.0, 1.0)
-    sin2_t = (1.0 - cos_i**2) / np.square(eta)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
     tir = sin2_t >= 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
     rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
@@ -41,11 +37,6 @@ def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray | float, cos_i: np.ndarray, cos_t: np.ndarray) -> np.ndarray:
-    """Refracted direction (Snell) of unit ``d`` through a surface whose unit normal ``n`` faces the
-    incident side (d . n = -cos_i); eta = n_t / n_i."""
-    eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
-    k = cos_i / eta - cos_t
-    t = np.empty(d.shape)
-    for i in range(3):  # column by column (see tracer.vec)
-        t[:, i] = d[:, i] / eta + k * n[:, i]
-    return normalize(t)
+    """Refracted direction (Snell), (3, n), of unit ``d`` through a surface whose unit normal ``n``
+    faces the incident side (d . n = -cos_i); eta = n_t / n_i."""
+    return normalize(d / eta + (cos_i / eta - cos_t) * n)

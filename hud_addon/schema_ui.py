@@ -1,0 +1,170 @@
+"""The tracer's schemas (tracer/schema.py) turned into Blender properties, panel rows, scene.json blocks
+and back: the one place where a field of a material, of the emission block or of a method's options
+becomes something a user sets in Blender. A new material or method option appears here without any
+change in the add-on.
+
+A block of fields lives on a PropertyGroup under a name prefix ("" for materials, "emission_" for the
+emission block, "<method>_" for a method's options). Per field ``f``: the property ``prefix + f.name``;
+for a group: ``prefix + group + "_use"`` (whether it is given) and its fields under
+``prefix + group + "_"``; for alternatives (exactly one set of fields given): an enum
+``prefix + "by"`` whose items are the first field of each set.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+
+from ..tracer.schema import REQUIRED, Field, to_json
+
+
+def _tooltip(f: Field) -> str:
+    unit = f" Unit: {f.unit}." if f.unit not in ("", "1") else ""
+    return f"{f.description}.{unit}" if f.description else unit.strip()
+
+
+def _default(f: Field):
+    d = f.ui_default if f.default in (REQUIRED, None) else f.default
+    return d
+
+
+def prop(f: Field):
+    """The Blender property of one field (kinds of tracer.schema)."""
+    d = _default(f)
+    common = {"name": f.title, "description": _tooltip(f)}
+    lo = -1e30 if f.minimum is None else f.minimum
+    hi = 1e30 if f.maximum is None else f.maximum
+    if f.kind == "rgb":
+        v = (float(d),) * 3 if not isinstance(d, list | tuple) else tuple(float(x) for x in d)
+        return FloatVectorProperty(subtype="COLOR", size=3, min=lo, max=hi, default=v if d is not None else (0.9,) * 3,
+                                   **common)
+    if f.kind in ("pair", "vector2"):
+        v = (0.0, 0.0) if d is None else ((float(d),) * 2 if not isinstance(d, list | tuple) else tuple(map(float, d)))
+        return FloatVectorProperty(size=2, min=lo, max=hi, default=v, **common)
+    if f.kind == "number":
+        return FloatProperty(min=lo, max=hi, default=float(d if d is not None else max(lo, 0.0)), precision=4, **common)
+    if f.kind == "int":
+        return IntProperty(min=int(max(lo, -2**31)), max=int(min(hi, 2**31 - 1)), default=int(d or 0), **common)
+    if f.kind == "bool":
+        return BoolProperty(default=bool(d), **common)
+    if f.kind == "choice":
+        return EnumProperty(items=[(c, c.capitalize(), "") for c in f.choices], default=d or f.choices[0], **common)
+    if f.kind == "image":
+        return PointerProperty(type=bpy.types.Image, **common)
+    if f.kind == "object_ref":
+        return PointerProperty(type=bpy.types.Object, **common)
+    if f.kind == "string":
+        return StringProperty(default=d or "", **common)
+    raise ValueError(f.kind)
+
+
+def _alternative_enum(alternatives, fields, label: str):
+    by_name = {f.name: f for f in fields}
+    items = [(alt[0], " + ".join(by_name[k].title for k in alt), "") for alt in alternatives]
+    return EnumProperty(name=label, items=items, description="Which of the alternative fields to give")
+
+
+def annotations(fields: tuple[Field, ...], prefix: str = "", alternatives=(), seen: dict | None = None) -> dict:
+    """The properties of a block (module docstring). ``seen`` shares properties by name across blocks
+    (materials: one "reflectance" for every material that has one)."""
+    out = {} if seen is None else seen
+    for f in fields:
+        if f.kind == "group":
+            out[f"{prefix}{f.name}_use"] = BoolProperty(name=f.title, description=_tooltip(f))
+            annotations(f.fields, f"{prefix}{f.name}_", f.alternatives, out)
+        else:
+            out.setdefault(prefix + f.name, prop(f))
+    if alternatives:
+        out.setdefault(f"{prefix}by", _alternative_enum(alternatives, fields, "Given by"))
+    return out
+
+
+def _active(fields, prefix, alternatives, owner):
+    """The fields of a block that are in use: all but the alternative sets not chosen."""
+    if not alternatives:
+        return list(fields)
+    chosen = getattr(owner, f"{prefix}by")
+    unused = {k for alt in alternatives if alt[0] != chosen for k in alt}
+    return [f for f in fields if f.name not in unused]
+
+
+def draw(layout, owner, fields, prefix: str = "", alternatives=()):
+    """Panel rows of a block."""
+    if alternatives:
+        layout.prop(owner, f"{prefix}by")
+    for f in _active(fields, prefix, alternatives, owner):
+        if f.kind == "group":
+            layout.prop(owner, f"{prefix}{f.name}_use")
+            if getattr(owner, f"{prefix}{f.name}_use"):
+                box = layout.box()
+                draw(box, owner, f.fields, f"{prefix}{f.name}_", f.alternatives)
+        elif f.kind == "image":
+            layout.template_ID(owner, prefix + f.name, open="image.open")
+        else:
+            layout.prop(owner, prefix + f.name)
+
+
+def export(owner, fields, prefix: str = "", alternatives=(), save_image=None) -> dict:
+    """The scene.json block of a block's properties. ``save_image(image, field)`` writes an image into
+    the scene folder and returns its relative path."""
+    out: dict = {}
+    for f in _active(fields, prefix, alternatives, owner):
+        value = getattr(owner, prefix + f.name) if f.kind != "group" else None
+        if f.kind == "group":
+            if getattr(owner, f"{prefix}{f.name}_use"):
+                out[f.name] = export(owner, f.fields, f"{prefix}{f.name}_", f.alternatives, save_image)
+        elif f.kind == "image":
+            if value is None:
+                raise ValueError(f"{f.title}: choose an image")
+            out[f.name] = save_image(value, f)
+        elif f.kind == "object_ref":
+            if value is None:
+                raise ValueError(f"{f.title}: choose an object")
+            out[f.name] = value.name
+        elif f.kind in ("rgb", "pair", "vector2"):
+            out[f.name] = to_json(f, np.array(value))
+        else:
+            out[f.name] = to_json(f, value)
+    return out
+
+
+def apply(owner, fields, spec: dict, prefix: str = "", alternatives=(), root: Path | None = None, objects=None):
+    """Set a block's properties from its scene.json form ``spec`` (what "Add HUD Preset" builds).
+    Images are loaded from ``root`` and packed; object references are looked up in ``objects``."""
+    if alternatives:
+        for alt in alternatives:
+            if any(k in spec for k in alt):
+                setattr(owner, f"{prefix}by", alt[0])
+    for f in fields:
+        if f.name not in spec:
+            continue
+        value = spec[f.name]
+        name = prefix + f.name
+        if f.kind == "group":
+            setattr(owner, f"{name}_use", True)
+            apply(owner, f.fields, value, f"{name}_", f.alternatives, root, objects)
+        elif f.kind == "image":
+            img = bpy.data.images.load(str(Path(root) / value), check_existing=False)
+            img.pack()
+            setattr(owner, name, img)
+        elif f.kind == "object_ref":
+            setattr(owner, name, objects[value])
+        elif f.kind == "rgb":
+            setattr(owner, name, (float(value),) * 3 if not isinstance(value, list) else tuple(map(float, value)))
+        elif f.kind == "pair":
+            setattr(owner, name, (float(value),) * 2 if not isinstance(value, list) else tuple(map(float, value)))
+        elif f.kind == "vector2":
+            setattr(owner, name, tuple(map(float, value)))
+        else:
+            setattr(owner, name, value)

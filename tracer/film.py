@@ -1,0 +1,154 @@
+"""The film: per-pixel sums of Monte Carlo estimates of apparent luminance (cd/m^2), in named
+components, with a variance that is honest for every estimator.
+
+Components. Each component has its own normaliser: a camera (backward) component counts samples per
+pixel, a light (forward) component counts particles emitted, whose splats land anywhere. The image is
+the sum over components of sum / normaliser. A method may split its estimate into several components
+with the same normaliser (the backward method keeps what next-event connections bring apart from
+what paths that hit a source bring, so the report can give the share of each).
+
+Variance from replicates. A batch is made of R independent replicates (a backward batch's sample
+passes over all pixels, a forward batch's particles dealt round-robin into groups); each replicate r
+gives a whole image m_r of its own, m_r = sum over components of (replicate's sum) / (replicate's
+normaliser). The film keeps per pixel the sums of m_r and of m_r^2 over all replicates of all
+batches, so the variance of the mean follows from the spread of the replicates,
+var = (sum m_r^2 / R - mean^2) / (R - 1), whatever the estimator: a splat that lands in several
+pixels, a connection, a photon. Replicates have equal normalisers, so the mean of the m_r is the
+image itself.
+
+Sums merge exactly: a film from another process adds to this one term by term (tracer.parallel adds
+batches in batch order, so the same batches give the same image bit for bit).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .units import luminance3
+
+
+class Film:
+    """Sums of one or more batches.
+
+    Parameters
+    ----------
+    width, height : retina pixels.
+    components : {name: normaliser kind} ("samples per pixel" or "particles", free text for the report).
+    """
+
+    def __init__(self, width: int, height: int, components: dict[str, str]):
+        self.width, self.height = width, height
+        n = width * height
+        self.kinds = dict(components)
+        self.sums = {name: np.zeros((3, n)) for name in components}  # RGB, (3, pixels)
+        self.norm = dict.fromkeys(components, 0)  # the normaliser's total
+        self.rep_sum = np.zeros(n)  # sum over replicates of Y(m_r)
+        self.rep_sq = np.zeros(n)  # sum over replicates of Y(m_r)^2
+        self.comp_rep_sum = {name: np.zeros(n) for name in components}  # per component, for its own error
+        self.comp_rep_sq = {name: np.zeros(n) for name in components}
+        self.replicates = 0
+
+    @property
+    def pixels(self) -> int:
+        return self.width * self.height
+
+    # -- filling (one batch) ---------------------------------------------------------------------
+    def record_batch(self, splats: Splats, replicates: int, normalisers: dict[str, int]):
+        """Add one batch: its ``splats``, made of ``replicates`` replicates, with the batch's
+        normaliser total of each component (every replicate has an equal share of it)."""
+        total = None
+        for name in self.kinds:
+            pixels, rep, values = splats.gather(name)
+            norm = normalisers.get(name, 0)
+            if len(pixels):
+                s = self.sums[name]
+                for c in range(3):
+                    s[c] += np.bincount(pixels, weights=values[c], minlength=self.pixels)
+            images = replicate_images(pixels, rep, values, replicates, self.pixels, max(norm, 1) / replicates)
+            self.comp_rep_sum[name] += images.sum(axis=0)
+            self.comp_rep_sq[name] += (images * images).sum(axis=0)
+            total = images if total is None else total + images
+            self.norm[name] += int(norm)
+        if total is not None:
+            self.rep_sum += total.sum(axis=0)
+            self.rep_sq += (total * total).sum(axis=0)
+        self.replicates += replicates
+
+    # -- merging ---------------------------------------------------------------------------------
+    def arrays(self) -> tuple:
+        """Everything a batch contributes, as plain arrays and numbers (what workers send back)."""
+        names = list(self.kinds)
+        return (names, [self.sums[k] for k in names], [self.norm[k] for k in names], self.rep_sum, self.rep_sq,
+                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names], self.replicates)
+
+    def merge_arrays(self, data: tuple):
+        names, sums, norms, rep_sum, rep_sq, c_sum, c_sq, replicates = data
+        for i, k in enumerate(names):
+            self.sums[k] += sums[i]
+            self.norm[k] += norms[i]
+            self.comp_rep_sum[k] += c_sum[i]
+            self.comp_rep_sq[k] += c_sq[i]
+        self.rep_sum += rep_sum
+        self.rep_sq += rep_sq
+        self.replicates += replicates
+
+    def merge(self, other: Film):
+        self.merge_arrays(other.arrays())
+
+    # -- results ---------------------------------------------------------------------------------
+    def component_rgb(self, name: str) -> np.ndarray:
+        """(H, W, 3) one component's estimate, cd/m^2."""
+        s = self.sums[name] / max(self.norm[name], 1)
+        return np.ascontiguousarray(s.T).reshape(self.height, self.width, 3)
+
+    def rgb(self) -> np.ndarray:
+        """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components."""
+        out = np.zeros((self.height, self.width, 3))
+        for name in self.kinds:
+            out += self.component_rgb(name)
+        return out
+
+    def _variance(self, s: np.ndarray, sq: np.ndarray) -> np.ndarray:
+        r = self.replicates
+        if r < 2:
+            return np.zeros((self.height, self.width))
+        mean = s / r
+        var = np.maximum(sq / r - mean * mean, 0.0) * r / (r - 1)
+        return (var / r).reshape(self.height, self.width)
+
+    def variance_y(self) -> np.ndarray:
+        """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
+        (zeros before two replicates exist)."""
+        return self._variance(self.rep_sum, self.rep_sq)
+
+    def component_variance_y(self, name: str) -> np.ndarray:
+        return self._variance(self.comp_rep_sum[name], self.comp_rep_sq[name])
+
+
+class Splats:
+    """What one batch adds to a film, collected bounce by bounce: per component, flat pixel indices
+    (m,), replicate indices (m,) and RGB values (3, m) (not yet normalised)."""
+
+    def __init__(self):
+        self.parts: dict[str, list] = {}
+
+    def add(self, component: str, pixels: np.ndarray, replicate: np.ndarray, values: np.ndarray):
+        if len(pixels):
+            self.parts.setdefault(component, []).append((pixels, replicate, values))
+
+    def gather(self, component: str):
+        parts = self.parts.get(component, [])
+        if not parts:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0))
+        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+                np.concatenate([p[2] for p in parts], axis=1))
+
+
+def replicate_images(pixels: np.ndarray, replicate: np.ndarray, values: np.ndarray, replicates: int, npix: int,
+                     normaliser: float) -> np.ndarray:
+    """(R, pixels) Y images of the replicates: the luminance of ``values`` (3, m) added at ``pixels``
+    (m,) of replicate ``replicate`` (m,), divided by each replicate's ``normaliser``."""
+    if len(pixels) == 0:
+        return np.zeros((replicates, npix))
+    y = luminance3(values) / normaliser
+    return np.bincount(replicate * npix + pixels, weights=y, minlength=replicates * npix).reshape(replicates, npix)

@@ -1,0 +1,352 @@
+"""The one path loop: every method (forward, backward, the brightness-theorem analysis) runs on it.
+
+Wavefront style, in the manner of pbrt-v4's wavefront integrator (src/pbrt/wavefront/): the paths of a
+batch are a :class:`PathState` of (3, n) planes and (n,) arrays, and each bounce runs the same stages
+over all of them:
+
+1. intersect: one Embree call for every path;
+2. sensor: the method may end paths that reach its sensor first (forward: the eye pupil);
+3. escaped: paths that leave the scene (the environment);
+4. emission: paths that hit an emitting object;
+5. shade: hits sorted by material type with one stable radix sort, the state permuted once, and each
+   material's contiguous slice shaded by its instance (per-object parameters gathered from small
+   tables): next-event connections where the material has non-delta lobes, then the continuation
+   (a sample of the material, or every delta branch where the method splits);
+6. shadow rays: every connection of the bounce in one Embree occlusion call;
+7. Russian roulette, with one rule (:class:`Roulette`), and the next state.
+
+A method is an object with the hooks ``sensor``, ``escaped``, ``emitted``, ``connect``,
+``deliver`` and ``continue_paths`` (see :class:`PathMethod`). Per-stage wall times accumulate in
+:class:`Timers` (intersect, sensor, shade, shadow, film, other).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..accel import OFFSET_SCALE
+from ..optics.bsdf import DELTA
+from ..units import luminance3
+from ..vec import max3, norm
+
+
+class Timers:
+    """Wall seconds per stage; ``with timers("shade"): ...``, nested stages count once (the outer)."""
+
+    STAGES = ("intersect", "sensor", "shade", "shadow", "film", "other")
+
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+        self._depth = 0
+        self._name = ""
+
+    def __call__(self, name: str):
+        self._name = name
+        return self
+
+    def __enter__(self):
+        self._depth += 1
+        if self._depth == 1:
+            self._stage, self._t0 = self._name, time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self._depth -= 1
+        if self._depth == 0:
+            self.seconds[self._stage] += time.perf_counter() - self._t0
+
+    def add(self, other: dict):
+        for k, v in other.items():
+            self.seconds[k] += v
+
+    def report(self, total: float) -> dict:
+        """Seconds per stage with "other" = ``total`` minus the timed stages."""
+        out = {k: float(self.seconds.get(k, 0.0)) for k in self.STAGES if k != "other"}
+        out["other"] = max(0.0, total - sum(out.values()))
+        return out
+
+
+@dataclass
+class PathState:
+    """A batch of paths, structure of arrays.
+
+    o, d : (3, n) ray origins (mm) and unit directions of the next segment. beta : (3, n) RGB path
+    weight (the throughput: radiance weight on camera paths, flux on light paths). owner : (n,) int64
+    pixel (camera paths) or particle index (light paths). rep : (n,) int64 replicate of the film.
+    pdf : (n,) solid-angle pdf with which the last direction was sampled (0 after a delta lobe).
+    specular : (n,) bool, the last vertex was a delta lobe (or the path start): what the path finds
+    next is counted in full, without a multiple-importance weight. extra : method-specific (n,)
+    arrays carried along (the analysis' chain codes).
+    """
+
+    o: np.ndarray
+    d: np.ndarray
+    beta: np.ndarray
+    owner: np.ndarray
+    rep: np.ndarray
+    pdf: np.ndarray
+    specular: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.owner)
+
+    def take(self, idx) -> PathState:
+        """The paths ``idx`` (an index array, or a slice for views), in that order."""
+        if isinstance(idx, slice):
+            return PathState(self.o[:, idx], self.d[:, idx], self.beta[:, idx], self.owner[idx], self.rep[idx],
+                             self.pdf[idx], self.specular[idx], {k: v[idx] for k, v in self.extra.items()})
+        t2 = lambda a: np.take(a, idx, axis=1)  # noqa: E731
+        return PathState(t2(self.o), t2(self.d), t2(self.beta), self.owner[idx], self.rep[idx], self.pdf[idx],
+                         self.specular[idx], {k: v[idx] for k, v in self.extra.items()})
+
+    @staticmethod
+    def concat(parts: list[PathState]) -> PathState:
+        if len(parts) == 1:
+            return parts[0]
+        c2 = lambda name: np.concatenate([getattr(p, name) for p in parts], axis=1)  # noqa: E731
+        c1 = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+        extra = {k: np.concatenate([p.extra[k] for p in parts]) for k in parts[0].extra}
+        return PathState(c2("o"), c2("d"), c2("beta"), c1("owner"), c1("rep"), c1("pdf"), c1("specular"), extra)
+
+    @staticmethod
+    def empty(extra_keys=()) -> PathState:
+        z = np.zeros(0, np.int64)
+        return PathState(np.zeros((3, 0)), np.zeros((3, 0)), np.zeros((3, 0)), z, z, np.zeros(0), np.zeros(0, bool),
+                         {k: z for k in extra_keys})
+
+
+@dataclass
+class Shadow:
+    """Connections waiting for their shadow rays: origins (3, m), unit directions (3, m), lengths (m,)
+    mm, the value each brings if unoccluded (3, m), and what the method needs to deliver it (the
+    state of the connecting paths, or anything else in ``data``)."""
+
+    o: np.ndarray
+    d: np.ndarray
+    tmax: np.ndarray
+    value: np.ndarray
+    data: dict
+
+    def __len__(self) -> int:
+        return self.o.shape[1]
+
+    def take(self, idx) -> Shadow:
+        t2 = lambda a: np.take(a, idx, axis=1)  # noqa: E731
+        return Shadow(t2(self.o), t2(self.d), self.tmax[idx], t2(self.value),
+                      {k: (np.take(v, idx, axis=-1)) for k, v in self.data.items()})
+
+    @staticmethod
+    def concat(parts: list[Shadow]) -> Shadow:
+        if len(parts) == 1:
+            return parts[0]
+        c = lambda a: np.concatenate(a, axis=-1)  # noqa: E731
+        return Shadow(c([p.o for p in parts]), c([p.d for p in parts]), c([p.tmax for p in parts]),
+                      c([p.value for p in parts]), {k: c([p.data[k] for p in parts]) for k in parts[0].data})
+
+
+def segment_to(accel, p: np.ndarray, ng: np.ndarray, y: np.ndarray):
+    """Shadow rays from surface points ``p`` (normals ``ng``) to points ``y`` on lights (all (3, n)):
+    (origins, unit directions, lengths). The origin is spawned off the surface toward ``y``, the
+    direction aims from it at ``y``, and the length stops short of ``y`` by a margin that scales with
+    the coordinates (as the spawn offset does), so the light's own surface never occludes it."""
+    o = accel.spawn(p, ng, y - p)
+    v = y - o
+    dist = norm(v)
+    margin = 2.0 * OFFSET_SCALE * (1.0 + max3(np.abs(y - accel.center_col)))
+    return o, v / np.maximum(dist, 1e-300), np.maximum(dist - margin, 0.0)
+
+
+class Roulette:
+    """Russian roulette by the luminance a path can still add to the image (Arvo & Kirk 1990,
+    doi:10.1145/97880.97886; a weight window in the sense of Vorba & Krivanek 2016,
+    doi:10.1145/2897824.2925912, with the image's reference luminance in place of their adjoint).
+
+    A method states, for each path, the most luminance (cd/m^2) it can still add to one pixel of its
+    batch's image (``potential``: the backward weight times the brightest source, or a particle's flux
+    over the smallest pixel extent). A path whose potential falls below ``EPSILON`` times the
+    reference luminance of the image (a pilot estimate, the same in every process) survives with
+    probability potential / (EPSILON reference) and its weight is divided by that probability;
+    all others continue untouched. The rule judges a path against the picture, not against its own
+    start: light through the LCD's black cells (1/300 of the symbols) or in a ghost (0.1 to 0.7 of
+    them), or a particle whose weight an aimed sample made small but which is headed for the pupil, is
+    always far above the threshold; only paths that could not change a pixel by EPSILON of the image's
+    luminance are thinned. The brightness-theorem analysis applies the same rule without randomness:
+    it drops such branches. With no reference (a pilot that found no light), nothing is thinned.
+    """
+
+    EPSILON = 1e-4
+
+    def __init__(self, reference_cd_m2: float):
+        self.threshold = self.EPSILON * reference_cd_m2 if reference_cd_m2 > 0 else 0.0
+
+    def survival(self, potential: np.ndarray) -> np.ndarray:
+        """(n,) survival probabilities in (0, 1] (0 only for a zero potential)."""
+        if self.threshold <= 0:
+            return np.where(potential > 0, 1.0, 0.0)
+        return np.minimum(potential / self.threshold, 1.0)
+
+    def apply(self, state: PathState, potential: np.ndarray, rng: np.random.Generator) -> PathState:
+        """Roulette ``state``: paths below the threshold survive with their probability, reweighted."""
+        q = self.survival(potential)
+        low = np.flatnonzero(q < 1.0)
+        if len(low) == 0:
+            return state
+        keep = np.ones(len(state), bool)
+        keep[low] = rng.random(len(low)) < q[low]
+        scale = np.ones(len(state))
+        scale[low] = 1.0 / np.maximum(q[low], 1e-300)
+        state = replace(state, beta=state.beta * scale)
+        return state.take(np.flatnonzero(keep))
+
+    def keep(self, potential: np.ndarray) -> np.ndarray:
+        """The deterministic form (the analysis): paths at or above the threshold."""
+        return self.survival(potential) >= 1.0
+
+
+class PathMethod:
+    """Hooks of a method on the path loop; the defaults do nothing (see the module docstring)."""
+
+    #: Transport mode of its paths: tracer.optics.bsdf.RADIANCE or IMPORTANCE.
+    mode = None
+
+    def sensor(self, state: PathState, t: np.ndarray, ctx) -> np.ndarray | None:
+        """Paths whose segment reaches the method's sensor before the scene (at distance ``t``):
+        record them and return their mask, or None."""
+        return None
+
+    def escaped(self, state: PathState, ctx):
+        """Paths that left the scene."""
+
+    def emitted(self, state: PathState, tri: np.ndarray, p: np.ndarray, t: np.ndarray, ctx):
+        """Paths that hit light triangles ``tri`` at points ``p`` after a segment of length ``t``."""
+
+    def connect(self, state: PathState, it, bsdf, ctx) -> Shadow | None:
+        """Connections from non-delta vertices (next-event estimation)."""
+        return None
+
+    def deliver(self, shadow: Shadow, visible: np.ndarray, ctx):
+        """What unoccluded connections bring."""
+
+    def continue_paths(self, state: PathState, it, bsdf, ctx) -> list[PathState]:
+        """The paths that leave the vertices of ``it`` (before roulette)."""
+        return []
+
+    def potential(self, state: PathState) -> np.ndarray:
+        """The most luminance (cd/m^2) each path can still add to one pixel (for :class:`Roulette`)."""
+        return np.full(len(state), np.inf)
+
+
+@dataclass
+class Context:
+    """What one batch's trip through the loop shares: the world, the random stream, the timers and
+    whatever the method collects (``splats``, leaves of the analysis)."""
+
+    world: object
+    rng: np.random.Generator
+    timers: Timers
+    splats: object = None
+    roulette: Roulette | None = None
+    store: dict = field(default_factory=dict)
+    #: Paths that found light (the method's efficiency numerator), or a flag per camera sample.
+    found: int = 0
+    sample_found: np.ndarray | None = None
+
+
+def continue_by_sampling(state: PathState, it, sampler, ctx, mode) -> list[PathState]:
+    """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path;
+    absorbed samples end."""
+    s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it))) if sampler.dims else None, mode)
+    beta = state.beta * s.weight
+    alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
+    if len(alive) == 0:
+        return []
+    wo = np.take(s.wo, alive, axis=1)
+    p = np.take(it.p, alive, axis=1)
+    ng = np.take(it.ng, alive, axis=1)
+    o = ctx.world.accel.spawn(p, ng, wo)
+    return [PathState(o, wo, np.take(beta, alive, axis=1), state.owner[alive], state.rep[alive], s.pdf[alive],
+                      (s.flags[alive] & DELTA) != 0, {k: v[alive] for k, v in state.extra.items()})]
+
+
+def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) -> int:
+    """Run paths through the loop until they end or reach ``max_depth`` segments; returns the number
+    of paths still alive at the limit (cut: a bias the report warns of)."""
+    world, timers = ctx.world, ctx.timers
+    accel = world.accel
+    materials = world.materials
+    lights = world.lights
+    for _ in range(max_depth):
+        n = len(state)
+        if n == 0:
+            return 0
+        if accel is None:  # nothing but the environment (and perhaps the sensor)
+            world.rays_without_geometry += n
+            with timers("sensor"):
+                ended = method.sensor(state, np.full(n, np.inf), ctx)
+            rest = np.flatnonzero(~ended) if ended is not None else np.arange(n)
+            if len(rest):
+                with timers("shade"):
+                    method.escaped(state.take(rest), ctx)
+            return 0
+        with timers("intersect"):
+            hits = accel.intersect(state.o, state.d)
+        face, t = hits.face, hits.t
+        with timers("sensor"):
+            ended = method.sensor(state, t, ctx)
+        with timers("shade"):
+            if ended is not None:
+                face = np.where(ended, -2, face)
+            miss = np.flatnonzero(face == -1)
+            if len(miss):
+                method.escaped(state.take(miss), ctx)
+            mat = np.where(face >= 0, world.face_material[np.maximum(face, 0)], -1).astype(np.int8)
+            order = np.argsort(mat, kind="stable")
+            counts = np.bincount(mat.astype(np.int64) + 1, minlength=len(materials) + 1)
+            first = counts[0]
+            order = order[first:]  # the hits, grouped by material
+            if len(order) == 0:
+                return 0
+            st = state.take(order)
+            f = face[order]
+            th = t[order]
+            p = st.o + th * st.d
+            ng = np.take(accel.normal, f, axis=1)
+            if len(lights):
+                tri = lights.face_light[f]
+                e = np.flatnonzero(tri >= 0)
+                if len(e):
+                    method.emitted(st.take(e), tri[e], np.take(p, e, axis=1), th[e], ctx)
+            bounds = np.cumsum(counts[1:])
+            nexts, shadows = [], []
+            start = 0
+            for m, bsdf in enumerate(materials):
+                end = int(bounds[m])
+                if end == start:
+                    continue
+                sl = slice(start, end)
+                start = end
+                if bsdf.flags == 0:
+                    continue  # absorbed
+                it = world.interaction(f[sl], p[:, sl], st.d[:, sl], ng[:, sl])
+                sub = st.take(sl)
+                if not bsdf.delta:
+                    sh = method.connect(sub, it, bsdf, ctx)
+                    if sh is not None and len(sh):
+                        shadows.append(sh)
+                nexts += method.continue_paths(sub, it, bsdf, ctx)
+        if shadows:
+            sh = Shadow.concat(shadows)
+            with timers("shadow"):
+                blocked = accel.occluded(sh.o, sh.d, sh.tmax)
+            with timers("shade"):
+                method.deliver(sh, ~blocked, ctx)
+        with timers("shade"):
+            state = PathState.concat(nexts) if nexts else PathState.empty(state.extra)
+            if ctx.roulette is not None and len(state):
+                state = ctx.roulette.apply(state, method.potential(state), ctx.rng)
+    return len(state)

@@ -1,0 +1,114 @@
+"""The paper's directed split (sec. 2) as a sampler with the BSDF interface.
+
+An emitter or a scattering surface with an ``aim`` draws, with probability w (the share), a direction
+toward its target aperture (the eye pupil where it is in direct view, an optical system's entrance
+pupil or its image, the LCD) and otherwise from its own law. The weight of either kind of sample is
+f |cos| / (w p_target + (1 - w) p_own): the one-sample mixture estimator (Veach & Guibas 1995,
+doi:10.1145/218380.218498), unbiased for every w in [0, 1). The paper's weights 1/(1 - w) and
+I_p Omega_p / (w I_s) are this estimator for a target cone excluded from the surface's own sampling.
+Mode "away" draws directions as if they came from the target: a virtual image behind the surface.
+
+:class:`Aimed` wraps a material (or :class:`CosineEmission` for emitters) and offers the same
+``sample`` / ``eval`` / ``pdf`` as any material, so the chi-square adapter of the tests checks it
+like every other sampler.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..sampling import cosine_hemisphere, frame_from_normal, to_world
+from ..vec import dot
+from .bsdf import REFLECTION, TRANSMISSION, BSDFSample, Interaction
+
+
+class CosineEmission:
+    """Lambertian emission as a sampler: directions about ``it.ng`` (the emitting side's normal) with
+    density cos / pi; f |cos| = cos / pi, so an unaimed sample has weight 1."""
+
+    dims = 2
+    flags = REFLECTION
+
+    def sample(self, it: Interaction, u: np.ndarray, mode=None) -> BSDFSample:
+        t, b, n = frame_from_normal(it.ng)
+        wo = to_world(cosine_hemisphere(u), t, b, n)
+        pdf = np.maximum(dot(wo, it.ng), 0.0) / np.pi
+        ok = pdf > 0
+        return BSDFSample(wo, np.broadcast_to(ok * 1.0, (3, len(it))).copy(), pdf,
+                          np.where(ok, REFLECTION, 0).astype(np.int8))
+
+    def eval(self, it: Interaction, wo: np.ndarray, mode=None) -> np.ndarray:
+        return np.broadcast_to(np.maximum(dot(wo, it.ng), 0.0) / np.pi, (3, len(it)))
+
+    def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
+        return np.maximum(dot(wo, it.ng), 0.0) / np.pi
+
+
+class Aimed:
+    """A material (or :class:`CosineEmission`) mixed with sampling toward targets.
+
+    Parameters
+    ----------
+    own : the sampler of the surface's own law.
+    aims : {object slot: (target, share, mode)} with target an aperture of tracer.apertures (a
+        DiskTarget or MeshTarget), share in [0, 1), mode "toward" or "away". Objects without an entry
+        sample their own law only.
+    slots : number of object slots in the world.
+    """
+
+    def __init__(self, own, aims: dict, slots: int):
+        self.own = own
+        self.flags = own.flags
+        self.share = np.zeros(slots)
+        self.which = np.full(slots, -1, np.int64)
+        self.sign = np.ones(slots)
+        self.targets = []
+        for slot, (target, share, mode) in aims.items():
+            if target not in self.targets:
+                self.targets.append(target)
+            self.share[slot] = share
+            self.which[slot] = self.targets.index(target)
+            self.sign[slot] = -1.0 if mode == "away" else 1.0
+        self.dims = 1 + own.dims + max((t.dims for t in self.targets), default=0)
+
+    def _target_pdf(self, it: Interaction, wo: np.ndarray, which: np.ndarray, sign: np.ndarray) -> np.ndarray:
+        p = np.zeros(len(it))
+        for k, target in enumerate(self.targets):
+            sel = np.flatnonzero(which == k)
+            if len(sel):
+                p[sel] = target.pdf(np.take(it.p, sel, axis=1), np.take(wo, sel, axis=1) * sign[sel])
+        return p
+
+    def sample(self, it: Interaction, u: np.ndarray, mode) -> BSDFSample:
+        n = len(it)
+        share, which, sign = self.share[it.slot], self.which[it.slot], self.sign[it.slot]
+        aimed = u[0] < share
+        own = self.own.sample(it, u[1:1 + self.own.dims], mode)
+        wo = own.wo
+        p_t = np.zeros(n)
+        ut = u[1 + self.own.dims:]
+        for k, target in enumerate(self.targets):
+            sel = np.flatnonzero(which == k)
+            if not len(sel):
+                continue
+            a = aimed[sel]
+            d_t, pt = target.sample(np.take(it.p, sel, axis=1), np.take(ut[:target.dims], sel, axis=1))
+            wo[:, sel] = np.where(a, d_t * sign[sel], wo[:, sel])
+            p_t[sel] = np.where(a, pt, 0.0)
+            back = sel[~a]
+            if len(back):  # the target strategy's density at the own samples' directions
+                p_t[back] = target.pdf(np.take(it.p, back, axis=1), np.take(wo, back, axis=1) * sign[back])
+        p_own = np.where(aimed, self.own.pdf(it, wo), own.pdf)
+        mix = share * p_t + (1.0 - share) * p_own
+        valid = np.where(aimed, p_t > 0, own.flags != 0) & (mix > 0)
+        weight = np.where(valid, self.own.eval(it, wo, mode) / np.where(valid, mix, 1.0), 0.0)
+        through = dot(wo, it.ng) * dot(it.d, it.ng) > 0
+        flags = np.where(valid, np.where(aimed, np.where(through, TRANSMISSION, REFLECTION), own.flags), 0)
+        return BSDFSample(wo, weight, np.where(valid, mix, 0.0), flags.astype(np.int8))
+
+    def eval(self, it: Interaction, wo: np.ndarray, mode) -> np.ndarray:
+        return self.own.eval(it, wo, mode)
+
+    def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
+        share, which, sign = self.share[it.slot], self.which[it.slot], self.sign[it.slot]
+        return share * self._target_pdf(it, wo, which, sign) + (1.0 - share) * self.own.pdf(it, wo)

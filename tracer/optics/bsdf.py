@@ -1,0 +1,131 @@
+"""The surface interface: what every material does with a batch of rays that hits it.
+
+In the manner of pbrt-v4's BxDFs and Mitsuba 3's BSDFs (Pharr, Jakob and Humphreys, "Physically Based
+Rendering", 4th ed., ch. 9; Jakob et al., Mitsuba 3, ``mitsuba/core/bsdf.h``), every material offers
+
+- ``sample(it, u, mode) -> BSDFSample``: new directions ``wo``, the weight f |cos| / pdf, the pdf (per
+  steradian; 0 for delta lobes) and per-ray lobe flags; the random numbers ``u`` (``dims``, n) are
+  arguments, so that the caller owns the streams;
+- ``eval(it, wo, mode)``: f |cos(wo)|, (3, n) RGB, 1/sr; zero for delta lobes;
+- ``pdf(it, wo)``: the solid-angle density of ``sample``; zero for delta lobes;
+- ``lobes(it, mode)``: for purely specular materials, every delta branch with its weight, for the
+  deterministic analysis and for splitting (a path may follow all branches at once).
+
+Directions follow the path: ``it.d`` is the propagation direction of the arriving ray, ``wo`` the one
+of the ray that leaves. Transport modes (Veach 1997, ch. 5, "non-symmetric scattering"): camera
+paths carry radiance (``RADIANCE``), light paths carry flux (``IMPORTANCE``); only refraction differs
+(radiance crossing into a denser medium is scaled by (n_i / n_t)^2 on camera paths only).
+
+One material instance serves every object of its type in a world (shading is grouped by material,
+not by object); per-object parameters live in small tables indexed by ``it.slot``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..vec import dot
+
+#: Transport modes.
+RADIANCE, IMPORTANCE = "radiance", "importance"
+
+#: Lobe flags (bits of ``BSDFSample.flags`` and ``BSDF.flags``).
+DELTA, REFLECTION, TRANSMISSION = 1, 2, 4
+
+
+@dataclass
+class Interaction:
+    """Rays (n of them) that hit surfaces of one material; all vectors (3, n) planes, world mm.
+
+    d : unit propagation directions of the arriving rays. p : hit points. ng : unit geometric
+    normals (mesh winding). ns : unit shading normals (interpolated, on the side of ng).
+    uv : (2, n) texture coordinates or None. slot : (n,) the objects' slots in the world.
+    cache : per-interaction values a material computes once (its local frames).
+    """
+
+    d: np.ndarray
+    p: np.ndarray
+    ng: np.ndarray
+    ns: np.ndarray
+    uv: np.ndarray | None
+    slot: np.ndarray
+    cache: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return self.d.shape[1]
+
+    def side(self) -> np.ndarray:
+        """+1 where the ray arrives on the front (normal) side, -1 on the back side; (n,)."""
+        if "side" not in self.cache:
+            self.cache["side"] = np.where(dot(self.d, self.ng) < 0, 1.0, -1.0)
+        return self.cache["side"]
+
+    def take(self, idx: np.ndarray) -> Interaction:
+        """The interaction of rays ``idx`` only."""
+        t = lambda a: None if a is None else np.take(a, idx, axis=-1)  # noqa: E731
+        return Interaction(t(self.d), t(self.p), t(self.ng), t(self.ns), t(self.uv), self.slot[idx])
+
+
+@dataclass
+class BSDFSample:
+    """Outgoing directions wo (3, n), weights f |cos| / pdf (3, n) (0 where absorbed), pdf (n,) per sr
+    (0 for delta lobes and absorbed samples), lobe flags (n,) int8 of the sampled lobe (0: absorbed)."""
+
+    wo: np.ndarray
+    weight: np.ndarray
+    pdf: np.ndarray
+    flags: np.ndarray
+
+
+class BSDF:
+    """Base of every material. Subclasses set ``schema`` (tracer.schema.Schema), ``flags`` (the union of
+    their lobes' flags; 0 for a black absorber), ``dims`` (random numbers per sample) and implement
+    the methods of the module docstring."""
+
+    schema = None
+    flags = 0
+    dims = 0
+    #: False for virtual objects that are not traced (apertures).
+    traced = True
+
+    def __init__(self, objects: list):
+        """``objects``: the scene objects (tracer.scene.SceneObject) of this material, with their
+        world slots in ``obj.slot``."""
+        self.objects = objects
+        n_slots = 1 + max(o.slot for o in objects)
+        self.local = np.full(n_slots, -1, np.int64)
+        for i, o in enumerate(objects):
+            self.local[o.slot] = i
+
+    @property
+    def delta(self) -> bool:
+        """Every lobe is a delta distribution (nothing for next-event estimation to connect to)."""
+        return bool(self.flags & DELTA) or self.flags == 0
+
+    def table(self, name: str, as_array=np.asarray) -> np.ndarray:
+        """A parameter of every object, stacked along the last axis: (k, objects) or (objects,)."""
+        return np.stack([np.asarray(as_array(o.material.params[name]), dtype=np.float64) for o in self.objects],
+                        axis=-1)
+
+    def gather(self, values: np.ndarray, it: Interaction) -> np.ndarray:
+        """Per-object values (..., objects) at the rays of ``it``: (..., 1), which broadcasts, when
+        there is one object, else (..., n)."""
+        if values.shape[-1] == 1:
+            return values
+        return np.take(values, self.local[it.slot], axis=-1)
+
+    # -- the interface ---------------------------------------------------------------------------
+    def sample(self, it: Interaction, u: np.ndarray, mode: str) -> BSDFSample:
+        raise NotImplementedError
+
+    def eval(self, it: Interaction, wo: np.ndarray, mode: str) -> np.ndarray:
+        return np.zeros((3, len(it)))
+
+    def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
+        return np.zeros(len(it))
+
+    def lobes(self, it: Interaction, mode: str) -> list[tuple[np.ndarray, np.ndarray, int, str]]:
+        """Every delta branch: [(wo (3, n), weight (3, n), flags, label)] (purely specular materials)."""
+        raise NotImplementedError(f"{type(self).__name__} has non-delta lobes")

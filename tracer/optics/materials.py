@@ -1,0 +1,374 @@
+"""The materials: one class each, carrying its schema (the fields of scene.json's "material" block).
+
+Adding a material: write a class here that derives from :class:`tracer.optics.bsdf.BSDF`, give it a
+``schema`` (tracer.schema) and the interface methods, and decorate it with :func:`material`. The
+loader's validation, the Blender add-on's properties, panel and export, the preset builder and the
+Mitsuba converter's check all follow from the schema; tests/test_materials.py runs the chi-square
+adapter on every non-delta material and the energy and reciprocity checks on all of them.
+
+Every routine works on a whole batch; the unit tests check energy conservation (and reciprocity
+where it applies) against closed forms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..sampling import cosine_hemisphere, frame_from_normal, gaussian_lobe, gaussian_lobe_pdf, to_local, to_world
+from ..schema import REQUIRED, Field, Schema
+from ..units import luminance
+from ..vec import dot, reflect
+from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
+from .fresnel import fresnel_unpolarized, refract
+
+#: The materials by scene.json type name.
+MATERIALS: dict[str, type[BSDF]] = {}
+
+
+def material(cls: type[BSDF]) -> type[BSDF]:
+    """Class decorator: register a material under its schema's name."""
+    MATERIALS[cls.schema.name] = cls
+    return cls
+
+
+def _rgb(name: str, default=None, label: str = "", description: str = "", required: bool = True) -> Field:
+    """An RGB ratio in [0, 1] (reflectance, transmittance); user interfaces start from 0.9."""
+    return Field(name, "rgb", REQUIRED if required else default, unit="1", minimum=0.0, maximum=1.0, label=label,
+                 description=description, ui_default=0.9)
+
+
+def _energy_check(params: dict, fail):
+    if np.any(params["reflectance"] + params["transmittance"] > 1 + 1e-12):
+        fail("", "reflectance + transmittance must not exceed 1 (energy conservation)")
+
+
+def _absorbed(n: int) -> BSDFSample:
+    return BSDFSample(np.zeros((3, n)), np.zeros((3, n)), np.zeros(n), np.zeros(n, np.int8))
+
+
+def mirror_directions(it: Interaction) -> np.ndarray:
+    """Specular reflection about the shading normal; where an interpolated normal would send the
+    ray through the mesh, about the geometric normal instead. (3, n)."""
+    out = reflect(it.d, it.ns)
+    wrong = dot(out, it.ng) * dot(it.d, it.ng) > 0
+    if np.any(wrong):
+        out = np.where(wrong, reflect(it.d, it.ng), out)
+    return out
+
+
+@material
+class Absorber(BSDF):
+    """Black: every ray ends here."""
+
+    schema = Schema("absorber", "Absorber", "Black: absorbs every ray (housings, frames, baffles)")
+
+    def sample(self, it, u, mode):
+        return _absorbed(len(it))
+
+
+@material
+class Aperture(BSDF):
+    """A virtual surface that is not traced: it names where an optical system's pupil is, for the
+    paper's directed sampling (sec. 2) and the backward method's eq. (3) strata."""
+
+    schema = Schema("aperture", "Aperture (virtual, not traced)",
+                    "A planar window that is not traced: a target for aiming and for the exit-pupil strata")
+    traced = False
+
+
+@material
+class Mirror(BSDF):
+    """Ideal mirror of RGB reflectance R, reflecting on both sides about the shading normal."""
+
+    schema = Schema("mirror", "Mirror", "Ideal specular reflector on both sides",
+                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1 per channel"),))
+    flags = DELTA | REFLECTION
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.r = self.table("reflectance")
+
+    def sample(self, it, u, mode):
+        n = len(it)
+        return BSDFSample(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, n)).copy(),
+                          np.zeros(n), np.full(n, self.flags, np.int8))
+
+    def lobes(self, it, mode):
+        return [(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, len(it))), self.flags,
+                 "reflect")]
+
+
+@material
+class Dielectric(BSDF):
+    """Smooth interface between ``ior_outside`` (front, normal side) and ``ior`` (back side).
+
+    Reflection or refraction is chosen with the Fresnel probability (Born & Wolf; see
+    :mod:`tracer.optics.fresnel`), so the weight is 1 in flux mode and (n_i / n_t)^2 after refraction
+    in radiance mode; total internal reflection reflects. Closed meshes with outward normals.
+    """
+
+    schema = Schema("dielectric", "Dielectric (glass)", "Smooth glass surface: Fresnel reflection and refraction",
+                    (Field("ior", "number", unit="1", minimum=1.0, label="IOR",
+                           description="Refractive index inside the mesh (behind its normals)", ui_default=1.52),
+                     Field("ior_outside", "number", 1.0, unit="1", minimum=1.0, label="IOR outside",
+                           description="Refractive index on the normals' side")))
+    flags = DELTA | REFLECTION | TRANSMISSION
+    dims = 1
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.n_in = self.table("ior")
+        self.n_out = self.table("ior_outside")
+
+    def _geometry(self, it: Interaction):
+        if "fresnel" not in it.cache:
+            side = it.side()
+            n_face = it.ns * side  # the shading normal on the incident side
+            n_in, n_out = self.gather(self.n_in, it), self.gather(self.n_out, it)
+            front = side > 0
+            n_i = np.where(front, n_out, n_in)
+            n_t = np.where(front, n_in, n_out)
+            cos_i = np.clip(-dot(it.d, n_face), 0.0, 1.0)
+            eta = n_t / n_i
+            r, cos_t = fresnel_unpolarized(cos_i, eta)
+            it.cache["fresnel"] = (side, n_face, eta, cos_i, r, cos_t)
+        return it.cache["fresnel"]
+
+    def _directions(self, it, refl: np.ndarray):
+        """Reflected or refracted directions (by ``refl``, (n,) bool), kept on the side the event
+        says where the shading normal disagrees with the geometric one."""
+        side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
+        out = np.where(refl, reflect(it.d, n_face), refract(it.d, n_face, eta, cos_i, cos_t))
+        want = np.where(refl, side, -side)
+        bad = np.sign(dot(out, it.ng)) != want
+        if np.any(bad):
+            out = np.where(bad, np.where(refl, reflect(it.d, it.ng), it.d), out)
+        return out
+
+    def sample(self, it, u, mode):
+        side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
+        refl = u[0] < r
+        w = np.ones(len(it)) if mode != RADIANCE else np.where(refl, 1.0, 1.0 / (eta * eta))
+        flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
+        return BSDFSample(self._directions(it, refl), np.broadcast_to(w, (3, len(it))).copy(), np.zeros(len(it)),
+                          flags)
+
+    def lobes(self, it, mode):
+        side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
+        n = len(it)
+        t = 1.0 - r if mode != RADIANCE else (1.0 - r) / (eta * eta)
+        return [(self._directions(it, np.ones(n, bool)), np.broadcast_to(r, (3, n)), DELTA | REFLECTION, "reflect"),
+                (self._directions(it, np.zeros(n, bool)), np.broadcast_to(t, (3, n)), DELTA | TRANSMISSION,
+                 "refract")]
+
+
+@material
+class Coating(BSDF):
+    """Coated thin partial reflector: reflects with R, transmits undeviated with T, absorbs the rest.
+    The branch is chosen with probability Y(R) / (Y(R) + Y(T))."""
+
+    schema = Schema("coating", "Coated partial reflector",
+                    "Thin coated plate: specular reflectance R, undeviated transmittance T",
+                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1"),
+                     _rgb("transmittance", label="Transmittance", description="Undeviated transmittance, 0..1")),
+                    check=_energy_check)
+    flags = DELTA | REFLECTION | TRANSMISSION
+    dims = 1
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.r, self.t = self.table("reflectance"), self.table("transmittance")
+        yr, yt = luminance(self.r.T), luminance(self.t.T)
+        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1.0), 0.0)
+
+    def sample(self, it, u, mode):
+        n = len(it)
+        p = self.gather(self.p_reflect, it)
+        refl = u[0] < p
+        out = np.where(refl, mirror_directions(it), it.d)
+        r, t = self.gather(self.r, it), self.gather(self.t, it)
+        w = np.where(refl, r / np.maximum(p, 1e-300), t / np.maximum(1.0 - p, 1e-300))
+        flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
+        return BSDFSample(out, np.broadcast_to(w, (3, n)).copy(), np.zeros(n), flags)
+
+    def lobes(self, it, mode):
+        n = len(it)
+        return [(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, n)), DELTA | REFLECTION,
+                 "reflect"),
+                (it.d, np.broadcast_to(self.gather(self.t, it), (3, n)), DELTA | TRANSMISSION, "transmit")]
+
+
+@material
+class LCD(BSDF):
+    """LCD modulator: a thin transmittance image, undeviated light.
+
+    T(u, v) = transmittance * (1/CR + (1 - 1/CR) * image(u, v)), so a clear cell transmits
+    ``transmittance`` and a black cell ``transmittance / contrast_ratio`` (the paper's 300:1 black
+    leak, sec. 3). Cells are looked up nearest-neighbour: the cellular structure is kept.
+    """
+
+    schema = Schema("lcd", "LCD modulator", "Thin transmissive image (the slide), light passes undeviated",
+                    (Field("image", "image", label="Slide", description="Transmittance image: white = clear cell"),
+                     Field("image_encoding", "choice", "srgb", choices=("srgb", "linear"), label="Encoding",
+                           description="How 8-bit slide values map to transmittance"),
+                     _rgb("transmittance", 1.0, "Transmittance", "Transmittance of a clear cell, 0..1",
+                          required=False),
+                     Field("contrast_ratio", "number", 300.0, unit="1", minimum=1.0, label="Contrast ratio",
+                           description="Clear-cell over black-cell transmittance")))
+    flags = DELTA | TRANSMISSION
+
+    def modulation(self, it: Interaction) -> np.ndarray:
+        """(3, n) transmittance relative to a clear cell, in [1/CR, 1]."""
+        out = np.empty((3, len(it)))
+        for i, o in enumerate(self.objects):
+            sel = self.local[it.slot] == i
+            if not np.any(sel):
+                continue
+            p = o.material.params
+            img = p["image"]
+            h, w = img.shape[:2]
+            uv = it.uv[:, sel]
+            x = np.clip(np.floor(uv[0] * w).astype(np.int64), 0, w - 1)
+            y = np.clip(np.floor((1.0 - uv[1]) * h).astype(np.int64), 0, h - 1)
+            cell = img[y, x].T
+            cr = p["contrast_ratio"]
+            out[:, sel] = 1.0 / cr + (1.0 - 1.0 / cr) * cell
+        return out
+
+    def transmittance(self, it: Interaction) -> np.ndarray:
+        """(3, n) RGB transmittance at the rays' texture coordinates (OBJ convention: v up)."""
+        return self.gather(self.table("transmittance"), it) * self.modulation(it)
+
+    def sample(self, it, u, mode):
+        n = len(it)
+        return BSDFSample(it.d.copy(), self.transmittance(it), np.zeros(n), np.full(n, self.flags, np.int8))
+
+    def lobes(self, it, mode):
+        return [(it.d, self.transmittance(it), self.flags, "transmit")]
+
+
+@material
+class Lambertian(BSDF):
+    """Lambertian reflector of RGB albedo rho: BRDF rho / pi on the side the light arrives from
+    (about the geometric normal)."""
+
+    schema = Schema("lambertian", "Lambertian reflector", "Matte surface: reflects rho/pi on the side light arrives",
+                    (_rgb("reflectance", label="Reflectance", description="Diffuse albedo, 0..1"),), can_aim=True)
+    flags = REFLECTION
+    dims = 3
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.rho = self.table("reflectance")
+        self.tau = np.zeros_like(self.rho)
+        self._setup()
+
+    def _setup(self):
+        yr, yt = luminance(self.rho.T), luminance(self.tau.T)
+        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1.0), 1.0)
+
+    def sample(self, it, u, mode):
+        p = self.gather(self.p_reflect, it)
+        refl = u[0] < p
+        normal = it.ng * (it.side() * np.where(refl, 1.0, -1.0))
+        t, b, nn = frame_from_normal(normal)
+        wo = to_world(cosine_hemisphere(u[1:3]), t, b, nn)
+        cos = dot(wo, nn)
+        pdf = np.where(refl, p, 1.0 - p) * np.maximum(cos, 0.0) / np.pi
+        w = np.where(refl, self.gather(self.rho, it) / np.maximum(p, 1e-300),
+                     self.gather(self.tau, it) / np.maximum(1.0 - p, 1e-300))
+        ok = pdf > 0
+        flags = np.where(ok, np.where(refl, REFLECTION, TRANSMISSION), 0).astype(np.int8)
+        return BSDFSample(wo, np.where(ok, w, 0.0), pdf, flags)
+
+    def _same_side(self, it, wo):
+        return dot(wo, it.ng) * dot(it.d, it.ng) < 0  # leaves back toward the incident side
+
+    def eval(self, it, wo, mode):
+        same = self._same_side(it, wo)
+        cos = np.abs(dot(wo, it.ng)) / np.pi
+        return np.where(same, self.gather(self.rho, it), self.gather(self.tau, it)) * cos
+
+    def pdf(self, it, wo):
+        p = self.gather(self.p_reflect, it)
+        same = self._same_side(it, wo)
+        return np.where(same, p, 1.0 - p) * np.abs(dot(wo, it.ng)) / np.pi
+
+
+@material
+class LambertianTransmitter(Lambertian):
+    """Diffuse screen: Lambertian transmission tau (and optional reflection rho), both 1/pi lobes."""
+
+    schema = Schema("lambertian_transmitter", "Diffuse screen (Lambertian transmitter)",
+                    "Rear-projection screen: transmits tau/pi and reflects rho/pi",
+                    (_rgb("transmittance", label="Transmittance", description="Diffuse transmittance, 0..1"),
+                     _rgb("reflectance", 0.0, "Reflectance", "Diffuse reflectance, 0..1", required=False)),
+                    can_aim=True, check=_energy_check)
+    flags = REFLECTION | TRANSMISSION
+
+    def __init__(self, objects):
+        BSDF.__init__(self, objects)
+        self.rho, self.tau = self.table("reflectance"), self.table("transmittance")
+        self._setup()
+
+
+@material
+class GaussianDiffuser(BSDF):
+    """Transmissive diffuser with a Gaussian lobe around the undeviated direction, in direction-cosine
+    space (the narrow-angle "raster scatterer" of the paper's lighting optics, sec. 4.2; the ABg
+    family of Harvey, see Stover, doi:10.1117/3.975276). Widths sigma_x, sigma_y follow the object's
+    local x axis and its perpendicular; scatter beyond grazing (|beta| >= 1) is absorbed. The lobe is
+    reciprocal (the Gaussian is even), so both transport modes share it.
+    """
+
+    schema = Schema("diffuser", "Gaussian diffuser", "Narrow-angle transmissive scatterer (Gaussian lobe)",
+                    (_rgb("transmittance", label="Transmittance", description="Scattered transmittance, 0..1"),
+                     Field("sigma_deg", "pair", unit="deg", minimum=0.0, maximum=60.0, exclusive_min=True,
+                           label="Lobe width", description="Lobe standard deviations along local x and y, degrees",
+                           ui_default=[3.0, 3.0])),
+                    can_aim=True)
+    flags = TRANSMISSION
+    dims = 2
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.tau = self.table("transmittance")
+        self.sigma = np.sin(np.radians(self.table("sigma_deg")))  # (2, objects), direction cosines
+        self.axis = np.stack([o.local_x for o in objects], axis=-1)  # (3, objects)
+
+    def _frame(self, it: Interaction):
+        if "frame" not in it.cache:
+            it.cache["frame"] = frame_from_normal(it.ng * -it.side(), self.gather(self.axis, it))
+        return it.cache["frame"]
+
+    def _beta0(self, it: Interaction) -> np.ndarray:
+        if "beta0" not in it.cache:
+            t, b, n = self._frame(it)
+            it.cache["beta0"] = np.stack([dot(it.d, t), dot(it.d, b)])
+        return it.cache["beta0"]
+
+    def sample(self, it, u, mode):
+        t, b, n = self._frame(it)
+        sigma = self.gather(self.sigma, it)
+        local, valid = gaussian_lobe(u, self._beta0(it), sigma)
+        pdf = np.where(valid, gaussian_lobe_pdf(local, self._beta0(it), sigma), 0.0)
+        flags = np.where(valid, TRANSMISSION, 0).astype(np.int8)
+        return BSDFSample(to_world(local, t, b, n), np.where(valid, self.gather(self.tau, it), 0.0), pdf, flags)
+
+    def pdf(self, it, wo):
+        t, b, n = self._frame(it)
+        return gaussian_lobe_pdf(to_local(wo, t, b, n), self._beta0(it), self.gather(self.sigma, it))
+
+    def eval(self, it, wo, mode):
+        return self.gather(self.tau, it) * self.pdf(it, wo)
+
+
+def make_materials(objects: list) -> list[BSDF]:
+    """One material instance per type present among ``objects`` (scene objects with ``slot``), in the
+    order of :data:`MATERIALS`."""
+    out = []
+    for name, cls in MATERIALS.items():
+        objs = [o for o in objects if o.material.type == name]
+        if objs:
+            out.append(cls(objs))
+    return out

@@ -1,0 +1,90 @@
+"""The render world: everything a method needs of a scene, built once.
+
+A :class:`World` holds the eye, the Embree scene, one material instance per material type, the light
+table, the environment and the aim targets. Every method, the brightness-theorem analysis and the
+benchmarks take a world instead of reaching into an integrator; worker processes build their own from
+the scene folder. :meth:`World.with_eye` gives a world seen from another eye (the eyebox scan) that
+shares everything else.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from .accel import Accelerator
+from .apertures import DiskTarget, MeshTarget
+from .eye import ThinLensEye
+from .lights import LightTable
+from .optics.bsdf import Interaction
+from .optics.materials import make_materials
+from .scene import EyeSpec, Scene
+from .units import luminance3
+
+
+class World:
+    """A scene made ready for tracing.
+
+    Attributes
+    ----------
+    scene : the loaded scene. eye : ThinLensEye. accel : Accelerator or None (nothing to trace).
+    materials : list of material instances (one per type present). face_material : (F,) int8 index
+    into ``materials`` of every global face. lights : LightTable. environment : the scene's environment.
+    """
+
+    def __init__(self, scene: Scene, eye: ThinLensEye | None = None):
+        self.scene = scene
+        self.eye = eye if eye is not None else ThinLensEye(scene.eye)
+        self.environment = scene.environment
+        traced = scene.traced_objects
+        self.accel = Accelerator(traced) if traced else None
+        self.materials = make_materials(traced)
+        slot_material = np.full(len(scene.objects), -1, np.int8)
+        for i, m in enumerate(self.materials):
+            for o in m.objects:
+                slot_material[o.slot] = i
+        self.slot_material = slot_material
+        self.lights = LightTable(traced)
+        if self.accel is not None:
+            self.face_material = slot_material[self.accel.face_slot]
+            self.lights.link_faces(self.accel.faces, self.accel.first_face)
+        self._targets: dict[str, DiskTarget | MeshTarget] = {}
+        #: Ray segments of a world without geometry (they all escape at once; counted as traced).
+        self.rays_without_geometry = 0
+
+    def with_eye(self, spec: EyeSpec) -> World:
+        """This world seen by another eye (same geometry, materials and lights)."""
+        other = copy.copy(self)
+        other.eye = ThinLensEye(spec)
+        other._targets = {k: v for k, v in self._targets.items() if k != "eye"}
+        return other
+
+    def target(self, name: str):
+        """The aiming target "eye" (the pupil disk) or a named planar object (an aperture, the LCD)."""
+        if name not in self._targets:
+            if name == "eye":
+                self._targets[name] = DiskTarget(self.eye.position, self.eye.gaze, self.eye.pupil_radius)
+            else:
+                self._targets[name] = MeshTarget(self.scene.object(name).triangles)
+        return self._targets[name]
+
+    @property
+    def rays_traced(self) -> int:
+        """Ray segments handed to Embree so far (scene and aim-target queries)."""
+        n = self.accel.rays_traced if self.accel is not None else self.rays_without_geometry
+        return n + sum(t.rays_traced for t in self._targets.values() if isinstance(t, MeshTarget))
+
+    def interaction(self, face: np.ndarray, p: np.ndarray, d: np.ndarray, ng: np.ndarray | None = None) -> Interaction:
+        """The interaction of rays arriving along ``d`` (3, n) at points ``p`` (3, n) of faces ``face``."""
+        a = self.accel
+        if ng is None:
+            ng = np.take(a.normal, face, axis=1)
+        ns, uv = a.shading(face, p, ng)
+        return Interaction(d, p, ng, ns, uv, a.face_slot[face])
+
+    @property
+    def max_luminance(self) -> float:
+        """The largest luminance of any light or of the environment, cd/m^2."""
+        lum = float(luminance3(self.lights.radiance).max()) if len(self.lights) else 0.0
+        return max(lum, self.environment.max_luminance)
