@@ -150,6 +150,7 @@ class Integrator:
         self.warnings: list[str] = []
         self.truncated = 0
         self._reference = None
+        self.pilot_rays = 0
 
     # -- options ---------------------------------------------------------------------------------
     @classmethod

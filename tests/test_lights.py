@@ -1,0 +1,199 @@
+"""The light table and the environment's sampling: every sampler against the density it reports
+(chi-square, as for the materials), power-proportional choices, and next-event estimates of
+illuminance against closed forms."""
+
+import math
+
+import numpy as np
+import pytest
+from chi2 import ChiSquareTest, SurfaceAdapter
+from conftest import z_bound
+
+from tracer.environment import HdriEnvironment, UniformEnvironment
+from tracer.lights import EMISSION, LightTable, make_emission
+from tracer.sampling import make_rng
+from tracer.scene import Material, SceneObject
+from tracer.schema import parse_block
+from tracer.validate import FieldChecker
+
+#: Sidak family of the chi-square tests in this module.
+CHI2_TESTS = 5
+
+
+def square(slot: int, center, size: float, normal_sign: float = -1.0, luminance: float = 1000.0, two_sided=False):
+    """A square light of side ``size`` mm in a plane z = const, facing -z (down) by default."""
+    c = np.asarray(center, dtype=np.float64)
+    h = 0.5 * size
+    v = c + np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]])
+    f = np.array([[0, 2, 1], [0, 3, 2]]) if normal_sign < 0 else np.array([[0, 1, 2], [0, 2, 3]])
+    o = SceneObject(f"light{slot}", slot, v, f, Material("absorber", {}))
+    params = parse_block(FieldChecker("t"), {"luminance": luminance, "two_sided": two_sided}, "emission",
+                         EMISSION.fields, alternatives=EMISSION.alternatives)
+    o.emission = make_emission(params, o.area_mm2, None)
+    return o
+
+
+LIGHTS = [square(0, [0.0, 0.0, 100.0], 4.0, luminance=1000.0),
+          square(1, [30.0, 0.0, 80.0], 2.0, luminance=8000.0),
+          square(2, [-20.0, 25.0, 120.0], 6.0, luminance=300.0, two_sided=True)]
+
+
+def test_emission_is_power_proportional_and_reports_its_density():
+    table = LightTable(LIGHTS)
+    n = 400_000
+    tri, points, normal, pdf = table.sample_emission(make_rng(1).random((4, n)))
+    power = np.array([o.emission.luminance * o.area_mm2 * (2 if o.emission.two_sided else 1) for o in LIGHTS])
+    share = power / power.sum()
+    counts = np.bincount(table.cluster[tri], minlength=3) / n
+    assert np.all(np.abs(counts - share) < z_bound(3) * np.sqrt(share * (1 - share) / n))
+    # The density of a point (and side) is its share over its object's area (halved for two sides).
+    obj = table.cluster[tri]
+    area = np.array([o.area_mm2 for o in LIGHTS])[obj]
+    sides = np.where(table.two_sided[tri], 2.0, 1.0)
+    np.testing.assert_allclose(pdf, share[obj] / (area * sides), rtol=1e-12)
+    # Points lie on their triangles; normals face the emitting side (both sides for the two-sided one).
+    np.testing.assert_allclose(points[2], np.array([100.0, 80.0, 120.0])[obj], atol=1e-9)
+    assert np.all(normal[2, obj < 2] == -1.0)
+    two = obj == 2
+    assert 0.45 < np.mean(normal[2, two] > 0) < 0.55
+
+
+def _importance(p, table):
+    """A Lambertian receiver facing up at p: its BSDF |cos| toward the lights (rho / pi cos)."""
+    return table.importance(p, lambda w: np.broadcast_to(0.8 / np.pi * np.maximum(w[2], 0.0), (3, w.shape[1])))
+
+
+@pytest.mark.parametrize("with_importance", [False, True], ids=["power", "importance"])
+def test_chi2_next_event_points_against_their_density(with_importance):
+    """Points for next-event estimation, histogrammed by light and position on it: x = light index +
+    the point's first coordinate on its square, y = its second; the expected density there is the
+    reported area density times the square's area."""
+    table = LightTable(LIGHTS)
+    p0 = np.array([[5.0], [3.0], [0.0]])
+    sizes = np.array([4.0, 2.0, 6.0])
+    corners = np.array([[-2.0, -2.0], [29.0, -1.0], [-23.0, 22.0]])
+
+    def sample(n, rng):
+        p = np.repeat(p0, n, axis=1)
+        imp = _importance(p, table) if with_importance else None
+        tri, y, pdf = table.sample_direct(p, rng.random((3, n)), imp)
+        k = table.cluster[tri]
+        s = (y[0] - corners[k, 0]) / sizes[k]
+        t = (y[1] - corners[k, 1]) / sizes[k]
+        sample.pdf_area = (k, s, t, pdf)
+        return np.stack([k + s, t], axis=-1), np.ones(n, bool)
+
+    def density(x, t):
+        k = np.floor(x).astype(np.int64)
+        s = x - k
+        y = np.stack([corners[k, 0] + s * sizes[k], corners[k, 1] + t * sizes[k],
+                      np.array([100.0, 80.0, 120.0])[k]])
+        # The density the sampler reports for a point: recompute it through the same selection.
+        p = np.repeat(p0, len(x), axis=1)
+        imp = _importance(p, table) if with_importance else None
+        share = table.cluster_power / table.cluster_power.sum()
+        if imp is None:
+            q = share[k]
+        else:
+            q_all = 0.1 * share[:, None] + 0.9 * imp / imp.sum(axis=0)
+            q = q_all[k, np.arange(len(k))]
+        a, b = table.cluster_range[k, 0], table.cluster_range[k, 1]
+        area = np.array([table.tris.area[i:j].sum() for i, j in zip(a, b, strict=True)])
+        del y
+        return q / area * sizes[k] ** 2
+
+    test = ChiSquareTest(((0.0, 3.0), (0.0, 1.0)), (24, 8), sample, density, 300_000, seed=5)
+    ok, msg = test.run(0.01, CHI2_TESTS)
+    assert ok, msg
+    # The reported pdf equals that density at the sampled points.
+    k, s, t, pdf = sample.pdf_area
+    np.testing.assert_allclose(pdf * sizes[k] ** 2, density(k + s, t), rtol=1e-9)
+
+
+def test_next_event_estimates_the_illuminance_of_a_small_source():
+    """E = I cos(theta) / d^2 with I = L A cos(theta_e) for a small flat source (a 0.2 mm square at
+    about 100 mm, so the small-source error is ~1e-6), by power and by importance selection alike."""
+    small = [square(0, [40.0, 0.0, 100.0], 0.2, luminance=1e6)]
+    table = LightTable(small)
+    p = np.zeros((3, 100_000))
+    for imp in (None, table.importance(p, lambda w: np.broadcast_to(np.maximum(w[2], 0.0), (3, w.shape[1])))):
+        tri, y, pdf = table.sample_direct(p, make_rng(3).random((3, p.shape[1])), imp)
+        w, dist, radiance, cos_y = table.connection(p, tri, y)
+        e = radiance[1] * np.maximum(w[2], 0.0) * cos_y / (dist * dist * pdf)  # lx-like, cd/m^2 sr
+        d = math.hypot(40.0, 100.0)
+        cos = 100.0 / d
+        expected = 1e6 * 0.04 * cos * cos / d**2
+        assert e.mean() == pytest.approx(expected, rel=1e-4)
+
+
+def test_chi2_hdri_sampling_against_its_pdf(tmp_path):
+    """Directions from a structured, rotated panorama, histogrammed in the panorama's own (u, v)
+    coordinates on a grid that refines its pixels (so no cell straddles a jump of the piecewise
+    constant density), against the reported density per steradian times d omega / (du dv) =
+    2 pi^2 cos(latitude); the sampler's own pdf equals pdf(d) and its radiance the lookup's."""
+    from tracer.environment import direction_to_equirect, equirect_to_direction
+
+    h, w = 32, 64
+    rng = make_rng(7)
+    image = rng.random((h, w, 3)) ** 4
+    image[5:8, 40:44] = 50.0  # a sun
+    image[:, :5] = 0.0  # a black band: never sampled
+    env = HdriEnvironment(image.astype(np.float32), "scale", 3.0, rotation_deg=30.0)
+
+    def sample(n, rng):
+        d, radiance, pdf = env.sample(rng.random((2, n)))
+        np.testing.assert_allclose(pdf, env.pdf(d), rtol=1e-9)
+        np.testing.assert_allclose(radiance, env.radiance(d), rtol=1e-12)
+        u, v = direction_to_equirect(env._to_image(d))
+        return np.stack([u, v], axis=-1), pdf > 0
+
+    def density(u, v):
+        local = equirect_to_direction(u, v)
+        a = np.radians(30.0)  # back to the world: rotate by +30 deg about z
+        d = np.stack([np.cos(a) * local[0] - np.sin(a) * local[1], np.sin(a) * local[0] + np.cos(a) * local[1],
+                      local[2]])
+        return env.pdf(d) * 2 * np.pi**2 * np.cos(np.pi * (v - 0.5))
+
+    test = ChiSquareTest(((0.0, 1.0), (0.0, 1.0)), (2 * w, 2 * h), sample, density, 500_000, seed=8)
+    ok, msg = test.run(0.01, CHI2_TESTS)
+    assert ok, msg
+    # The black band is never sampled.
+    u, _ = sample(100_000, make_rng(12))[0].T
+    assert np.all(u >= 5 / w)
+
+
+def test_hdri_next_event_estimate_of_the_mean_luminance():
+    """The mean of radiance / pdf over samples estimates the integral of the luminance over the sphere:
+    4 pi times the panorama's mean luminance (its calibration)."""
+    image = make_rng(9).random((16, 32, 3)).astype(np.float32)
+    env = HdriEnvironment(image, "mean", 250.0)
+    d, radiance, pdf = env.sample(make_rng(10).random((2, 400_000)))
+    from tracer.units import luminance3
+
+    est = luminance3(radiance) / pdf
+    assert abs(est.mean() - 4 * np.pi * 250.0) < z_bound(1) * est.std() / np.sqrt(len(est)) + 0.01 * 4 * np.pi * 250
+
+
+def test_uniform_environment_sampling():
+    env = UniformEnvironment(42.0)
+    d, radiance, pdf = env.sample(make_rng(2).random((2, 1000)))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, rtol=1e-7)
+    np.testing.assert_allclose(pdf, 1 / (4 * np.pi))
+    np.testing.assert_allclose(env.pdf(d), 1 / (4 * np.pi))
+
+
+def test_quadrature_weights_cover_every_light():
+    table = LightTable(LIGHTS)
+    pts, normals, weights, radiance, two = table.quadrature(4)
+    assert weights.sum() == pytest.approx(sum(o.area_mm2 for o in LIGHTS), rel=1e-12)
+    assert pts.shape[1] == len(weights) == radiance.shape[1] == len(two) == normals.shape[1]
+
+
+def test_chi2_cosine_emission():
+    """The Lambertian emission sampler through the materials' adapter."""
+    from tracer.optics.aimed import CosineEmission
+
+    adapter = SurfaceAdapter(CosineEmission(), (0.0, 0.0, -1.0), (0.3, -0.2, 1.0), mode="importance")
+    ok, msg = adapter.test(seed=11).run(0.01, CHI2_TESTS)
+    assert ok, msg
+    assert adapter.weight_mismatch < 1e-9

@@ -1,0 +1,200 @@
+"""The transport core: next-event estimation against a closed form and against the other methods on
+every preset, multiple importance sampling that counts every light path once, connections blocked by
+glass, and a Russian roulette that does not starve the LCD's black leak."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import edit_json, z_bound
+
+from presets import PRESETS
+from presets._build import SceneBuilder, box, frame_matrix, rectangle
+from tracer.imageio import write_png
+from tracer.integrators import INTEGRATORS, Budget
+from tracer.scene import load_scene
+from tracer.units import Y_WEIGHTS
+from tracer.world import World
+
+#: The method variants every preset must agree on.
+VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
+            "backward, no NEE": ("backward", {"next_event": False})}
+
+
+def run(world, variant, rays, seed, reference=None):
+    method, changes = VARIANTS[variant]
+    integ = INTEGRATORS[method](world, seed, options=dict(world.scene.method_options(method)) | changes)
+    if reference is not None:
+        integ._reference = reference  # the roulette's reference luminance (0: no roulette)
+    res = integ.render(Budget(rays=rays))
+    return res.film.rgb() @ Y_WEIGHTS, res.film.variance_y(), res
+
+
+def region_mean(y, var, mask):
+    k = int(mask.sum())
+    return float(y[mask].mean()), math.sqrt(float(var[mask].sum())) / k
+
+
+# -- a closed form --------------------------------------------------------------------------------
+def _small_source(folder):
+    """A 0.2 mm Lambertian square (L = 1e6 cd/m^2) 100 mm above a Lambertian floor (rho = 0.5), 40 mm
+    to the side of the point the eye looks at through a 0.04 deg field."""
+    sb = SceneBuilder(folder, "small-source", "a small source over a Lambertian floor")
+    sb.add("floor", rectangle(400.0, 400.0)[:2], {"type": "lambertian", "reflectance": 0.5,
+                                                  "aim": {"target": "eye", "share": 0.9}})
+    sb.add("led", rectangle(0.2, 0.2)[:2], {"type": "absorber"},
+           frame_matrix([40.0, 0.0, 100.0], [1, 0, 0], [0, 0, -1]), emission={"luminance": 1e6})
+    return sb.write(eye={"position": [0.0, -300.0, 300.0], "gaze": [0.0, 1.0, -1.0], "up": [0, 0, 1],
+                         "pupil_diameter_mm": 4.0, "accommodation_distance_mm": 424.26,
+                         "resolution": [3, 3], "fov_deg": [0.04, 0.04]})
+
+
+def test_lambertian_floor_under_a_small_source(tmp_path):
+    """E = I cos(theta) / d^2, I = L A cos(theta_e): the floor reads rho E / pi. Backward with
+    next-event estimation reproduces it to 2 % at 300,000 rays; forward (the floor aims at the pupil)
+    agrees within its error, which stays large: few particles land on the 0.3 mm of floor the pixels
+    see. The paper's plain backward method would need a path to hit a 0.04 mm^2 source from the floor
+    (p ~ 4e-7 per path)."""
+    world = World(load_scene(_small_source(tmp_path / "s")))
+    d2 = 40.0**2 + 100.0**2
+    cos = 100.0 / math.sqrt(d2)
+    expected = 0.5 / math.pi * 1e6 * 0.04 * cos * cos / d2
+    for variant, rays in (("backward", 300_000), ("forward", 3_000_000)):
+        y, var, res = run(world, variant, rays, seed=4)
+        m, se = region_mean(y, var, np.ones(y.shape, bool))
+        assert abs(m - expected) < z_bound(2) * se, (variant, m, expected, se)
+        if variant == "backward":
+            assert se < 0.02 * expected, (variant, se / expected)
+    assert res.efficiency > 0
+
+
+# -- every preset, every method ---------------------------------------------------------------------
+RAYS = {"hud-direct": 4_000_000, "analytic-mirror": 1_500_000, "analytic-disk": 1_500_000,
+        "analytic-furnace": 1_000_000}
+
+
+@pytest.mark.parametrize("name", list(PRESETS))
+def test_forward_and_backward_with_and_without_nee_agree(tmp_path, name):
+    """The image mean and the bright region's mean (pixels above 10 % of the 99th percentile of the
+    backward image) of the three method variants agree pairwise within their combined errors
+    (alpha = 0.01, Sidak over presets, regions and pairs)."""
+    world = World(load_scene(PRESETS[name].write(tmp_path / name)))
+    out = {v: run(world, v, RAYS[name], seed=21) for v in VARIANTS}
+    y_ref = out["backward"][0]
+    bright = y_ref > 0.1 * np.percentile(y_ref, 99)
+    bound = z_bound(len(PRESETS) * 2 * 3)
+    for mask in (np.ones(y_ref.shape, bool), bright):
+        stats = {v: region_mean(y, var, mask) for v, (y, var, _) in out.items()}
+        names = list(stats)
+        for i in range(3):
+            for j in range(i + 1, 3):
+                (a, sa), (b, sb) = stats[names[i]], stats[names[j]]
+                assert abs(a - b) < bound * math.hypot(sa, sb), (name, names[i], names[j], a, b, sa, sb)
+
+
+def test_nee_report_gives_the_share_of_connections(tmp_path):
+    """On hud-direct the symbols are the scatterer lit by the LEDs: almost all of the estimate comes
+    through connections, and the report's components add up to the image."""
+    from tracer.render import render_folder
+
+    report, res = render_folder(PRESETS["hud-direct"].write(tmp_path / "s"), "backward", Budget(rays=1_500_000), 3,
+                                tmp_path / "out", analyse=False)
+    comp = report["components"]
+    assert set(comp) == {"hit", "connection"}
+    assert comp["connection"]["share"] > 0.95 and report["method_details"]["connection_share"] > 0.95
+    assert sum(c["mean_cd_m2"] for c in comp.values()) == pytest.approx(report["luminance"]["mean"], rel=1e-9)
+    assert set(report["stage_seconds"]) >= {"intersect", "shade", "shadow", "film", "other"}
+
+
+# -- connections blocked by glass ------------------------------------------------------------------
+def _light_behind_glass(folder):
+    """A Lambertian floor lit by a panel through a glass slab: every connection from the floor to the
+    panel crosses the slab, a specular surface, and is blocked; the light reaches the floor only along
+    the paths' own sampled directions."""
+    sb = SceneBuilder(folder, "glass", "a light behind a glass slab")
+    sb.add("floor", rectangle(300.0, 300.0)[:2], {"type": "lambertian", "reflectance": 0.6})
+    sb.add("slab", box(300.0, 300.0, 5.0), {"type": "dielectric", "ior": 1.5}, frame_matrix([0, 0, 40.0], [1, 0, 0],
+                                                                                          [0, 0, 1]))
+    sb.add("panel", rectangle(60.0, 60.0)[:2], {"type": "absorber"}, frame_matrix([0, 0, 80.0], [1, 0, 0], [0, 0, -1]),
+           emission={"luminance": 1000.0})
+    return sb.write(eye={"position": [0.0, -30.0, 20.0], "gaze": [0.0, 1.0, -0.7], "up": [0, 0, 1],
+                         "pupil_diameter_mm": 4.0, "accommodation_distance_mm": 40.0,
+                         "resolution": [6, 6], "fov_deg": [20.0, 20.0]})
+
+
+def test_glass_between_vertex_and_light_blocks_the_connection(tmp_path):
+    world = World(load_scene(_light_behind_glass(tmp_path / "g")))
+    (y1, v1, r1), (y2, v2, r2) = (run(world, v, 2_000_000, seed=5) for v in ("backward", "backward, no NEE"))
+    assert r1.extra.get("connection_share", 0.0) == 0.0  # every connection crossed the slab
+    m1, s1 = region_mean(y1, v1, np.ones(y1.shape, bool))
+    m2, s2 = region_mean(y2, v2, np.ones(y2.shape, bool))
+    assert m1 > 0 and abs(m1 - m2) < z_bound(1) * math.hypot(s1, s2)
+
+
+# -- roulette and the black leak -------------------------------------------------------------------
+def _lcd_chain(folder):
+    """A backlight, two glass slabs (four refractions), an LCD of 300:1 (left half clear, right half
+    black) and a diffuse screen 1 mm behind it, seen by the eye 300 mm away: a particle meets six
+    surfaces, aimed twice (the backlight at the LCD, the screen at the pupil)."""
+    folder.mkdir(parents=True)
+    img = np.zeros((8, 64, 3), np.uint8)
+    img[:, :32] = 255
+    write_png(folder / "half.png", img)
+    sb = SceneBuilder(folder, "lcd-chain", "backlight, slabs, LCD 300:1, screen")
+    sb.add("backlight", rectangle(40.0, 20.0)[:2], {"type": "absorber"}, frame_matrix([0, 0, 0], [1, 0, 0], [0, 1, 0]),
+           emission={"luminance": 1e4, "aim": {"target": "lcd", "share": 0.9}})
+    for k, y in enumerate((20.0, 40.0)):
+        sb.add(f"slab{k}", box(60.0, 5.0, 40.0), {"type": "dielectric", "ior": 1.5},
+               frame_matrix([0, y, 0], [1, 0, 0], [0, 0, 1]))
+    v, f, uv = rectangle(20.0, 10.0)
+    sb.add("lcd", (v, f), {"type": "lcd", "image": "half.png", "transmittance": 0.5, "contrast_ratio": 300.0},
+           frame_matrix([0, 69.0, 0], [1, 0, 0], [0, -1, 0]), uv=uv)
+    sb.add("screen", rectangle(30.0, 20.0)[:2], {"type": "lambertian_transmitter", "transmittance": 0.8,
+                                                 "aim": {"target": "eye", "share": 0.9}},
+           frame_matrix([0, 70.0, 0], [1, 0, 0], [0, 1, 0]))
+    return sb.write(eye={"position": [0, 370.0, 0], "gaze": [0, -1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                         "accommodation_distance_mm": 300.0, "resolution": [24, 8], "fov_deg": [3.6, 1.2]},
+                    methods={"forward": {"max_depth": 32}})
+
+
+def _halves(y, var):
+    """(clear, black) region means and standard errors: columns away from the blurred edge."""
+    w = y.shape[1]
+    clear, black = np.zeros(y.shape, bool), np.zeros(y.shape, bool)
+    clear[:, 2:w // 2 - 3] = True
+    black[:, w // 2 + 3:w - 2] = True
+    # The image is flipped left-right: the eye looks back along -y, so the slide's left is on the right.
+    (a, sa), (b, sb) = region_mean(y, var, clear), region_mean(y, var, black)
+    return ((a, sa), (b, sb)) if a > b else ((b, sb), (a, sa))
+
+
+def test_roulette_does_not_starve_the_black_leak(tmp_path):
+    """Forward through six surfaces, with the one roulette rule: the black half reads 1/300 of the clear
+    half within its error, its relative error is no worse than the clear half's (as many particles land
+    there, each with 1/300 of the weight), and no worse than with roulette switched off. A rule that
+    judged paths by their own weight would kill the black half's particles 300 times as often: the
+    same check with the threshold raised a thousandfold (a rule that starves the black half: its
+    particles carry 1/300 of the weight and fall below the threshold first) fails."""
+    world = World(load_scene(_lcd_chain(tmp_path / "s")))
+    rays = 3_000_000
+    y, var, res = run(world, "forward", rays, seed=8)
+    (c, sc), (b, sb) = _halves(y, var)
+    ratio, ratio_se = b / c, (b / c) * math.hypot(sb / b, sc / c)
+    assert abs(ratio - 1 / 300) < z_bound(1) * ratio_se
+    assert (sb / b) < 1.5 * (sc / c), ((sb / b), (sc / c))
+    y0, var0, _ = run(world, "forward", rays, seed=8, reference=0.0)  # roulette off
+    (_, _), (b0, sb0) = _halves(y0, var0)
+    assert (sb / b) < 1.3 * (sb0 / b0)
+    starving = res.extra["roulette"]["reference_luminance_cd_m2"] * 1e3
+    ys, vs, _ = run(world, "forward", rays, seed=8, reference=starving)
+    (cs, scs), (bs, sbs) = _halves(ys, vs)
+    assert (sbs / bs) > 2.0 * (scs / cs)  # the check has the power to see starvation
+
+
+def test_roulette_reference_comes_from_a_pilot_that_every_process_repeats(tmp_path, preset):
+    folder = preset("analytic-mirror")
+    a = INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance
+    b = INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance
+    assert a == b and a == pytest.approx(159.5, rel=0.1)
+    edit_json(folder, lambda d: d["objects"][2]["emission"].update(luminance=0.0))
+    assert INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance == 0.0
