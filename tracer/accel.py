@@ -83,6 +83,13 @@ class Accelerator:
         c = cross(self.e1, self.e2)
         length = norm(c)
         self.normal = c / np.where(length > 0, length, 1.0)
+        #: Plane offsets n . v0 (mm) of every face, with one more entry for misses (face -1).
+        self.plane = np.append(dot(self.normal, self.v0), 0.0)
+        self.normal_ext = np.concatenate([self.normal, np.zeros((3, 1))], axis=1)
+        #: Spawn offset of every face (mm, and 0 for misses): OFFSET_SCALE (1 + the largest coordinate of
+        #: its corners relative to the scene's centre), so that float32 Embree resolves it.
+        corner_extent = np.abs(tri - self.center).max(axis=(1, 2))
+        self.offset = np.append(OFFSET_SCALE * (1.0 + corner_extent), 0.0)
         self.corner = np.ascontiguousarray(f.T)  # (3, F) global vertex indices of each face's corners
         self.vertex_normal = np.ascontiguousarray(np.concatenate(vnormal).T)  # (3, V)
         self.vertex_uv = np.ascontiguousarray(np.concatenate(vuv).T)  # (2, V)
@@ -101,7 +108,10 @@ class Accelerator:
         return o32, d32
 
     def intersect(self, o: np.ndarray, d: np.ndarray) -> Hits:
-        """Closest hits of rays (origins (3, n) mm, unit directions (3, n)); one Embree call."""
+        """Closest hits of rays (origins (3, n) mm, unit directions (3, n)); one Embree call.
+
+        The distance is refined in float64 against the hit triangle's plane, t = (n . v0 - n . o) / (n . d)
+        (Embree's float32 t is off by ~1e-7 |t|); where the ray grazes the plane, Embree's own t stays."""
         n = o.shape[1]
         self.rays_traced += n
         if n == 0:
@@ -109,17 +119,13 @@ class Accelerator:
         o32, d32 = self._rays32(o, d)
         res = self._scene.run(o32, d32, output=True)
         face = res["primID"].astype(np.int64)
-        t = np.full(n, np.inf)
-        idx = np.flatnonzero(face >= 0)
-        if len(idx):
-            f = face[idx]
-            o_h, d_h = np.take(o, idx, axis=1), np.take(d, idx, axis=1)
-            ng = np.take(self.normal, f, axis=1)
-            # Refine t in float64 against the triangle's plane (Embree's float32 t is off by ~1e-7 |t|).
-            denom = dot(d_h, ng)
-            ok = np.abs(denom) > 1e-9
-            t[idx] = np.where(ok, dot(np.take(self.v0, f, axis=1) - o_h, ng) / np.where(ok, denom, 1.0),
-                              res["tfar"][idx].astype(np.float64))
+        ng = np.take(self.normal_ext, face, axis=1)  # face -1 (a miss) takes the zero column
+        denom = dot(d, ng)
+        ok = np.abs(denom) > 1e-9
+        t = (np.take(self.plane, face) - dot(o, ng)) / np.where(ok, denom, 1.0)
+        if not ok.all():
+            t = np.where(ok, t, res["tfar"].astype(np.float64))
+            t[face < 0] = np.inf
         return Hits(face, t)
 
     def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:
@@ -167,10 +173,11 @@ class Accelerator:
                   + bary[1] * np.take(t, corner[2], axis=1))
         return ns, uv
 
-    def spawn(self, p: np.ndarray, ng: np.ndarray, d: np.ndarray) -> np.ndarray:
+    def spawn(self, p: np.ndarray, ng: np.ndarray, d: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
         """Origins (3, n) for rays leaving surface points ``p`` along ``d``: offset along the
         geometric normal ``ng`` to the side the ray goes, by a distance that scales with the
-        coordinates' magnitude (float32 Embree resolves about 6e-8 of it)."""
-        offset = OFFSET_SCALE * (1.0 + max3(np.abs(p - self.center_col)))
-        side = np.where(dot(d, ng) >= 0, offset, -offset)
-        return p + side * ng
+        coordinates' magnitude (float32 Embree resolves about 6e-8 of it): ``offset`` (n,) mm, the
+        faces' own (:attr:`offset`), or computed from ``p``."""
+        if offset is None:
+            offset = OFFSET_SCALE * (1.0 + max3(np.abs(p - self.center_col)))
+        return p + np.copysign(offset, dot(d, ng)) * ng

@@ -106,7 +106,8 @@ class ChiefRays(PathMethod):
                 dist = norm(v)
                 w = v / dist  # toward the light point
                 cos_e = -dot(w, np.take(qn, kk, axis=1))
-                blocked = accel.occluded(*segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1)))
+                blocked = accel.occluded(*segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1),
+                                                     it.offset[ii]))
                 sub = it.take(ii)
                 f = bsdf.eval(sub, w, RADIANCE)
                 g = np.where(((cos_e > 0) | q2[kk]) & ~blocked, np.abs(cos_e) * qw[kk] / (dist * dist), 0.0)
@@ -115,7 +116,8 @@ class ChiefRays(PathMethod):
         self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out)
         return None
 
-    def continue_paths(self, state, it, bsdf, ctx):
+    def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
+        """Every delta branch, as further paths (``nxt`` is left dead: the analysis always splits)."""
         if not bsdf.delta:
             return []
         names, which = self._by_object(it.slot)
@@ -133,7 +135,7 @@ class ChiefRays(PathMethod):
                 lcd = np.where(np.isnan(lcd), rel, lcd)
             sig = self._code(state.extra["sig"][keep], [f"{nm}:{label}" for nm in names], which[keep])
             w_k = np.take(wo, keep, axis=1)
-            o = ctx.world.accel.spawn(np.take(it.p, keep, axis=1), np.take(it.ng, keep, axis=1), w_k)
+            o = ctx.world.accel.spawn(np.take(it.p, keep, axis=1), np.take(it.ng, keep, axis=1), w_k, it.offset[keep])
             out.append(PathState(o, w_k, np.take(beta, keep, axis=1), state.owner[keep], state.rep[keep],
                                  np.zeros(len(keep)), np.ones(len(keep), bool), {"sig": sig, "lcd": lcd[keep]}))
         return out

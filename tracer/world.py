@@ -48,6 +48,8 @@ class World:
         self.lights = LightTable(traced)
         if self.accel is not None:
             self.face_material = slot_material[self.accel.face_slot]
+            #: face_material with -1 appended: np.take with face -1 (a miss) gives -1.
+            self.face_material_ext = np.append(self.face_material, np.int8(-1))
             self.lights.link_faces(self.accel.faces, self.accel.first_face)
         self._targets: dict[str, DiskTarget | MeshTarget] = {}
         #: Ray segments of a world without geometry (they all escape at once; counted as traced).
@@ -75,13 +77,18 @@ class World:
         n = self.accel.rays_traced if self.accel is not None else self.rays_without_geometry
         return n + sum(t.rays_traced for t in self._targets.values() if isinstance(t, MeshTarget))
 
-    def interaction(self, face: np.ndarray, p: np.ndarray, d: np.ndarray, ng: np.ndarray | None = None) -> Interaction:
-        """The interaction of rays arriving along ``d`` (3, n) at points ``p`` (3, n) of faces ``face``."""
+    def interaction(self, face: np.ndarray, p: np.ndarray, d: np.ndarray, ng: np.ndarray | None = None,
+                    material=None) -> Interaction:
+        """The interaction of rays arriving along ``d`` (3, n) at points ``p`` (3, n) of faces ``face``
+        (all of one ``material``, when given: its objects say whether normals or UVs need interpolating)."""
         a = self.accel
         if ng is None:
             ng = np.take(a.normal, face, axis=1)
-        ns, uv = a.shading(face, p, ng)
-        return Interaction(d, p, ng, ns, uv, a.face_slot[face])
+        if material is not None and not any(o.normals is not None or o.uv is not None for o in material.objects):
+            ns, uv = ng, None
+        else:
+            ns, uv = a.shading(face, p, ng)
+        return Interaction(d, p, ng, ns, uv, a.face_slot[face], np.take(a.offset, face))
 
     @property
     def max_luminance(self) -> float:

@@ -56,6 +56,8 @@ class ForwardTracer(Integrator, PathMethod):
                 for o in self.lights.objects if o.emission.aim is not None and o.emission.aim.share > 0}
         self.emission = Aimed(CosineEmission(), aims, slots)
         self.min_extent = float(self.eye.extent.min())
+        #: Particles on the retina per particle emitted in the pilot (tracer.integrators.base).
+        self.pilot_efficiency = 0.0
         #: When a list, the sensor stage appends (particle ids (k,), points (3, k) mm, reached_eye (k,)
         #: bool) for every event, so that tools can draw the sampled light paths.
         self.recorder: list | None = None
@@ -85,8 +87,10 @@ class ForwardTracer(Integrator, PathMethod):
         return n, ctx.found, {"light": n}, REPLICATES
 
     def pilot_mean(self, ctx) -> float:
-        """The image's mean luminance (cd/m^2) from a batch of ``batch_size`` particles."""
-        n, _, _, _ = self.run_batch(ctx)
+        """The image's mean luminance (cd/m^2) from a batch of ``batch_size`` particles; also keeps the
+        pilot's efficiency (particles on the retina per particle emitted) for :meth:`potential`."""
+        n, found, _, _ = self.run_batch(ctx)
+        self.pilot_efficiency = found / n
         _, _, values = ctx.splats.gather("light")
         return float(luminance3(values).sum()) / (n * self.eye.width * self.eye.height)
 
@@ -108,12 +112,14 @@ class ForwardTracer(Integrator, PathMethod):
             ctx.splats.add("light", pix, state.rep[k], np.take(state.beta, k, axis=1) / eye.extent[pix])
         return at
 
-    def continue_paths(self, state, it, bsdf, ctx):
-        return continue_by_sampling(state, it, self._sampler[id(bsdf)], ctx, IMPORTANCE)
+    def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
+        return continue_by_sampling(state, it, self._sampler[id(bsdf)], ctx, IMPORTANCE, nxt, sl)
 
-    def potential(self, state):
-        """A particle adds at most its flux over the smallest pixel extent, over the batch's particles."""
-        return luminance3(state.beta) / (self.batch_size * self.min_extent)
+    def potential(self, beta):
+        """The luminance a particle stands for as a sample of its pixel: landing, it adds at most its flux
+        over the smallest pixel extent over the batch's N particles, and a pixel receives about
+        N efficiency / pixels of them; so flux x efficiency / (smallest extent x pixels), whatever N."""
+        return luminance3(beta) * (self.pilot_efficiency / (self.min_extent * self.eye.width * self.eye.height))
 
     # -- light paths for display -----------------------------------------------------------------
     def _record(self, pid: np.ndarray, points: np.ndarray, at_eye: np.ndarray):

@@ -149,12 +149,13 @@ class Shadow:
                       c([p.value for p in parts]), {k: c([p.data[k] for p in parts]) for k in parts[0].data})
 
 
-def segment_to(accel, p: np.ndarray, ng: np.ndarray, y: np.ndarray):
-    """Shadow rays from surface points ``p`` (normals ``ng``) to points ``y`` on lights (all (3, n)):
-    (origins, unit directions, lengths). The origin is spawned off the surface toward ``y``, the
-    direction aims from it at ``y``, and the length stops short of ``y`` by a margin that scales with
-    the coordinates (as the spawn offset does), so the light's own surface never occludes it."""
-    o = accel.spawn(p, ng, y - p)
+def segment_to(accel, p: np.ndarray, ng: np.ndarray, y: np.ndarray, offset: np.ndarray | None = None):
+    """Shadow rays from surface points ``p`` (normals ``ng``, spawn offsets ``offset``) to points ``y`` on
+    lights (all (3, n)): (origins, unit directions, lengths). The origin is spawned off the surface
+    toward ``y``, the direction aims from it at ``y``, and the length stops short of ``y`` by a margin
+    that scales with the coordinates (as the spawn offset does), so the light's own surface never
+    occludes it."""
+    o = accel.spawn(p, ng, y - p, offset)
     v = y - o
     dist = norm(v)
     margin = 2.0 * OFFSET_SCALE * (1.0 + max3(np.abs(y - accel.center_col)))
@@ -166,12 +167,13 @@ class Roulette:
     doi:10.1145/97880.97886; a weight window in the sense of Vorba & Krivanek 2016,
     doi:10.1145/2897824.2925912, with the image's reference luminance in place of their adjoint).
 
-    A method states, for each path, the most luminance (cd/m^2) it can still add to one pixel of its
-    batch's image (``potential``: the backward weight times the brightest source, or a particle's flux
-    over the smallest pixel extent). A path whose potential falls below ``EPSILON`` times the
-    reference luminance of the image (a pilot estimate, the same in every process) survives with
-    probability potential / (EPSILON reference) and its weight is divided by that probability;
-    all others continue untouched. The rule judges a path against the picture, not against its own
+    A method states, for each path, the most luminance (cd/m^2) it can still carry as one sample of a
+    pixel (``potential``: a camera path's weight times the brightest source; a particle's flux over
+    the smallest pixel extent, scaled by the share of the batch's particles that land in one pixel).
+    A path whose potential falls below ``EPSILON`` times the reference luminance of the image (a pilot
+    estimate, the same in every process) survives with probability potential / (EPSILON reference)
+    and its weight is divided by that probability; all others continue untouched. Nothing depends on
+    the batch size. The rule judges a path against the picture, not against its own
     start: light through the LCD's black cells (1/300 of the symbols) or in a ghost (0.1 to 0.7 of
     them), or a particle whose weight an aimed sample made small but which is headed for the pupil, is
     always far above the threshold; only paths that could not change a pixel by EPSILON of the image's
@@ -185,9 +187,9 @@ class Roulette:
         self.threshold = self.EPSILON * reference_cd_m2 if reference_cd_m2 > 0 else 0.0
 
     def survival(self, potential: np.ndarray) -> np.ndarray:
-        """(n,) survival probabilities in (0, 1] (0 only for a zero potential)."""
+        """(n,) survival probabilities in [0, 1] (1 everywhere without a reference)."""
         if self.threshold <= 0:
-            return np.where(potential > 0, 1.0, 0.0)
+            return np.ones(len(potential))
         return np.minimum(potential / self.threshold, 1.0)
 
     def apply(self, state: PathState, potential: np.ndarray, rng: np.random.Generator) -> PathState:
@@ -232,13 +234,15 @@ class PathMethod:
     def deliver(self, shadow: Shadow, visible: np.ndarray, ctx):
         """What unoccluded connections bring."""
 
-    def continue_paths(self, state: PathState, it, bsdf, ctx) -> list[PathState]:
-        """The paths that leave the vertices of ``it`` (before roulette)."""
+    def continue_paths(self, state: PathState, it, bsdf, ctx, nxt: Next, sl: slice) -> list[PathState]:
+        """The paths that leave the vertices of ``it``, before roulette: one per vertex written into
+        ``nxt[sl]`` (the default ends them all), and any further paths (splitting) returned."""
         return []
 
-    def potential(self, state: PathState) -> np.ndarray:
-        """The most luminance (cd/m^2) each path can still add to one pixel (for :class:`Roulette`)."""
-        return np.full(len(state), np.inf)
+    def potential(self, beta: np.ndarray) -> np.ndarray:
+        """The most luminance (cd/m^2) each path of weight ``beta`` (3, n) can still add to one pixel
+        (for :class:`Roulette`)."""
+        return np.full(beta.shape[1], np.inf)
 
 
 @dataclass
@@ -257,20 +261,57 @@ class Context:
     sample_found: np.ndarray | None = None
 
 
-def continue_by_sampling(state: PathState, it, sampler, ctx, mode) -> list[PathState]:
-    """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path;
-    absorbed samples end."""
+@dataclass
+class Next:
+    """The continuation of one bounce's hits, in their sorted order: each material writes the slice of
+    its hits (new origins, directions, weights, pdf, whether the lobe was delta, whether the path goes
+    on), and the loop compacts the survivors once (:func:`trace`)."""
+
+    o: np.ndarray
+    d: np.ndarray
+    beta: np.ndarray
+    pdf: np.ndarray
+    specular: np.ndarray
+    alive: np.ndarray
+
+    @staticmethod
+    def empty(m: int) -> Next:
+        return Next(np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty(m), np.empty(m, bool),
+                    np.zeros(m, bool))
+
+
+def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice) -> list[PathState]:
+    """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path,
+    written into ``nxt[sl]``; absorbed samples end. Returns no further paths."""
     s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it))) if sampler.dims else None, mode)
     beta = state.beta * s.weight
-    alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
-    if len(alive) == 0:
-        return []
-    wo = np.take(s.wo, alive, axis=1)
-    p = np.take(it.p, alive, axis=1)
-    ng = np.take(it.ng, alive, axis=1)
-    o = ctx.world.accel.spawn(p, ng, wo)
-    return [PathState(o, wo, np.take(beta, alive, axis=1), state.owner[alive], state.rep[alive], s.pdf[alive],
-                      (s.flags[alive] & DELTA) != 0, {k: v[alive] for k, v in state.extra.items()})]
+    nxt.beta[:, sl] = beta
+    nxt.d[:, sl] = s.wo
+    nxt.o[:, sl] = ctx.world.accel.spawn(it.p, it.ng, s.wo, it.offset)
+    nxt.pdf[sl] = s.pdf
+    nxt.specular[sl] = (s.flags & DELTA) != 0
+    nxt.alive[sl] = (s.flags != 0) & (luminance3(beta) > 0)
+    return []
+
+
+def _compact(method: PathMethod, st: PathState, nxt: Next, ctx) -> PathState:
+    """The paths that go on after a bounce: roulette on the living ones of ``nxt`` (sorted order), then
+    one compaction."""
+    alive = nxt.alive
+    beta = nxt.beta
+    if ctx.roulette is not None and ctx.roulette.threshold > 0:
+        live = np.flatnonzero(alive)
+        q = ctx.roulette.survival(method.potential(np.take(beta, live, axis=1)))
+        low = np.flatnonzero(q < 1.0)
+        if len(low):
+            idx = live[low]
+            keep = ctx.rng.random(len(low)) < q[low]
+            alive[idx[~keep]] = False
+            beta[:, idx[keep]] *= 1.0 / np.maximum(q[low][keep], 1e-300)
+    keep = np.flatnonzero(alive)
+    t2 = lambda a: np.take(a, keep, axis=1)  # noqa: E731
+    return PathState(t2(nxt.o), t2(nxt.d), t2(beta), st.owner[keep], st.rep[keep], nxt.pdf[keep],
+                     nxt.specular[keep], {k: v[keep] for k, v in st.extra.items()})
 
 
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) -> int:
@@ -300,15 +341,16 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             ended = method.sensor(state, t, ctx)
         with timers("shade"):
             if ended is not None:
-                face = np.where(ended, -2, face)
-            miss = np.flatnonzero(face == -1)
+                miss = np.flatnonzero((face < 0) & ~ended)
+                face = np.where(ended, -1, face)  # paths at the sensor end here, like misses
+            else:
+                miss = np.flatnonzero(face < 0)
             if len(miss):
                 method.escaped(state.take(miss), ctx)
-            mat = np.where(face >= 0, world.face_material[np.maximum(face, 0)], -1).astype(np.int8)
+            mat = np.take(world.face_material_ext, face)  # -1 for misses and paths at the sensor
             order = np.argsort(mat, kind="stable")
             counts = np.bincount(mat.astype(np.int64) + 1, minlength=len(materials) + 1)
-            first = counts[0]
-            order = order[first:]  # the hits, grouped by material
+            order = order[counts[0]:]  # the hits, grouped by material
             if len(order) == 0:
                 return 0
             st = state.take(order)
@@ -321,24 +363,24 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
                 e = np.flatnonzero(tri >= 0)
                 if len(e):
                     method.emitted(st.take(e), tri[e], np.take(p, e, axis=1), th[e], ctx)
-            bounds = np.cumsum(counts[1:])
-            nexts, shadows = [], []
+            nxt = Next.empty(len(order))
+            splits, shadows = [], []
             start = 0
             for m, bsdf in enumerate(materials):
-                end = int(bounds[m])
+                end = start + int(counts[m + 1])
                 if end == start:
                     continue
                 sl = slice(start, end)
                 start = end
                 if bsdf.flags == 0:
                     continue  # absorbed
-                it = world.interaction(f[sl], p[:, sl], st.d[:, sl], ng[:, sl])
+                it = world.interaction(f[sl], p[:, sl], st.d[:, sl], ng[:, sl], bsdf)
                 sub = st.take(sl)
                 if not bsdf.delta:
                     sh = method.connect(sub, it, bsdf, ctx)
                     if sh is not None and len(sh):
                         shadows.append(sh)
-                nexts += method.continue_paths(sub, it, bsdf, ctx)
+                splits += method.continue_paths(sub, it, bsdf, ctx, nxt, sl)
         if shadows:
             sh = Shadow.concat(shadows)
             with timers("shadow"):
@@ -346,7 +388,10 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             with timers("shade"):
                 method.deliver(sh, ~blocked, ctx)
         with timers("shade"):
-            state = PathState.concat(nexts) if nexts else PathState.empty(state.extra)
-            if ctx.roulette is not None and len(state):
-                state = ctx.roulette.apply(state, method.potential(state), ctx.rng)
+            state = _compact(method, st, nxt, ctx)
+            if splits:
+                extra = PathState.concat(splits)
+                if ctx.roulette is not None:
+                    extra = ctx.roulette.apply(extra, method.potential(extra.beta), ctx.rng)
+                state = PathState.concat([state, extra])
     return len(state)

@@ -42,6 +42,7 @@ class Interaction:
     d : unit propagation directions of the arriving rays. p : hit points. ng : unit geometric
     normals (mesh winding). ns : unit shading normals (interpolated, on the side of ng).
     uv : (2, n) texture coordinates or None. slot : (n,) the objects' slots in the world.
+    offset : (n,) the faces' spawn offsets (mm; tracer.accel), or None.
     cache : per-interaction values a material computes once (its local frames).
     """
 
@@ -51,6 +52,7 @@ class Interaction:
     ns: np.ndarray
     uv: np.ndarray | None
     slot: np.ndarray
+    offset: np.ndarray | None = None
     cache: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -65,7 +67,7 @@ class Interaction:
     def take(self, idx: np.ndarray) -> Interaction:
         """The interaction of rays ``idx`` only."""
         t = lambda a: None if a is None else np.take(a, idx, axis=-1)  # noqa: E731
-        return Interaction(t(self.d), t(self.p), t(self.ng), t(self.ns), t(self.uv), self.slot[idx])
+        return Interaction(t(self.d), t(self.p), t(self.ng), t(self.ns), t(self.uv), self.slot[idx], t(self.offset))
 
 
 @dataclass
