@@ -270,7 +270,7 @@ class SurfaceAdapter:
             f = self.sampler.eval(sub, wo, self.mode)
             pdf = self.sampler.pdf(sub, wo)
             expected = f / pdf
-            got = s.weight[:, k]
+            got = np.broadcast_to(s.weight, (3, n))[:, k]
             self.weight_mismatch = max(self.weight_mismatch, float(np.max(np.abs(got - expected) /
                                                                          np.maximum(np.abs(expected), 1e-300))))
             if not np.allclose(s.pdf[k], pdf, rtol=1e-9, atol=0):

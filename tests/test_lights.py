@@ -59,8 +59,8 @@ def test_emission_is_power_proportional_and_reports_its_density():
 
 
 def _importance(p, table):
-    """A Lambertian receiver facing up at p: its BSDF |cos| toward the lights (rho / pi cos)."""
-    return table.importance(p, lambda w: np.broadcast_to(0.8 / np.pi * np.maximum(w[2], 0.0), (3, w.shape[1])))
+    """A Lambertian receiver facing up at p: its sampling density toward the lights (cos / pi)."""
+    return table.importance(p, lambda w: np.maximum(w[2], 0.0) / np.pi)
 
 
 @pytest.mark.parametrize("with_importance", [False, True], ids=["power", "importance"])
@@ -116,7 +116,7 @@ def test_next_event_estimates_the_illuminance_of_a_small_source():
     small = [square(0, [40.0, 0.0, 100.0], 0.2, luminance=1e6)]
     table = LightTable(small)
     p = np.zeros((3, 100_000))
-    for imp in (None, table.importance(p, lambda w: np.broadcast_to(np.maximum(w[2], 0.0), (3, w.shape[1])))):
+    for imp in (None, table.importance(p, lambda w: np.maximum(w[2], 0.0))):
         tri, y, pdf = table.sample_direct(p, make_rng(3).random((3, p.shape[1])), imp)
         w, dist, radiance, cos_y = table.connection(p, tri, y)
         e = radiance[1] * np.maximum(w[2], 0.0) * cos_y / (dist * dist * pdf)  # lx-like, cd/m^2 sr

@@ -90,13 +90,41 @@ class Accelerator:
         #: its corners relative to the scene's centre), so that float32 Embree resolves it.
         corner_extent = np.abs(tri - self.center).max(axis=(1, 2))
         self.offset = np.append(OFFSET_SCALE * (1.0 + corner_extent), 0.0)
-        self.corner = np.ascontiguousarray(f.T)  # (3, F) global vertex indices of each face's corners
-        self.vertex_normal = np.ascontiguousarray(np.concatenate(vnormal).T)  # (3, V)
-        self.vertex_uv = np.ascontiguousarray(np.concatenate(vuv).T)  # (2, V)
         self.face_has_normals = np.concatenate(has_n)
         self.face_has_uv = np.concatenate(has_uv)
+        # Vertex attributes are linear over a triangle: a(p) = M p + c for points p in its plane, with
+        # u = d1 . (p - v0), v = d2 . (p - v0) through the dual basis of (e1, e2) (d1, d2 are orthogonal
+        # to the normal, so points just off the plane interpolate as their projections). Per face:
+        # the 3 x 3 (normals) or 2 x 3 (texture coordinates) matrix M, row-major, then c.
+        n = self.normal.T
+        e1, e2 = self.e1.T, self.e2.T
+        d1 = np.cross(e2, n)
+        d1 /= np.where(np.abs((d1 * e1).sum(1)) > 0, (d1 * e1).sum(1), 1.0)[:, None]
+        d2 = np.cross(n, e1)
+        d2 /= np.where(np.abs((d2 * e2).sum(1)) > 0, (d2 * e2).sum(1), 1.0)[:, None]
+        v0 = self.v0.T
+        self.normal_map = self._affine(np.concatenate(vnormal)[f], d1, d2, v0) if self.face_has_normals.any() else None
+        self.uv_map = self._affine(np.concatenate(vuv)[f], d1, d2, v0) if self.face_has_uv.any() else None
         self.faces = nfaces
         self.rays_traced = 0
+
+    @staticmethod
+    def _affine(attr: np.ndarray, d1: np.ndarray, d2: np.ndarray, v0: np.ndarray) -> np.ndarray:
+        """(k * 3 + k, F) rows of M (row-major) and c of the map p -> M p + c that interpolates the
+        per-corner attribute ``attr`` (F, 3, k) linearly over each triangle."""
+        a0, da1, da2 = attr[:, 0], attr[:, 1] - attr[:, 0], attr[:, 2] - attr[:, 0]  # (F, k)
+        m = da1[:, :, None] * d1[:, None, :] + da2[:, :, None] * d2[:, None, :]  # (F, k, 3)
+        c = a0 - da1 * (d1 * v0).sum(1)[:, None] - da2 * (d2 * v0).sum(1)[:, None]
+        k = attr.shape[2]
+        return np.ascontiguousarray(np.concatenate([m.reshape(len(attr), 3 * k), c], axis=1).T)
+
+    @staticmethod
+    def _apply(table: np.ndarray, face: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """M p + c of the faces ``face`` at points ``p`` (3, n), (k, n)."""
+        t = np.take(table, face, axis=1)
+        k = t.shape[0] // 4
+        return np.stack([t[3 * i] * p[0] + t[3 * i + 1] * p[1] + t[3 * i + 2] * p[2] + t[3 * k + i]
+                         for i in range(k)])
 
     def _rays32(self, o: np.ndarray, d: np.ndarray):
         n = o.shape[1]
@@ -152,25 +180,16 @@ class Accelerator:
     def shading(self, face: np.ndarray, p: np.ndarray, ng: np.ndarray):
         """Shading normals (3, n) (interpolated vertex normals on the side of ``ng``; ``ng`` itself for
         flat objects) and texture coordinates (2, n) or None, at points ``p`` on faces ``face``."""
-        with_n = self.face_has_normals[face]
-        with_uv = self.face_has_uv[face]
-        if not (with_n.any() or with_uv.any()):
-            return ng, None
-        bary = self.barycentrics(face, p)
-        w0 = 1.0 - bary[0] - bary[1]
-        corner = np.take(self.corner, face, axis=1)
         ns, uv = ng, None
-        if with_n.any():
-            vn = self.vertex_normal
-            s = (w0 * np.take(vn, corner[0], axis=1) + bary[0] * np.take(vn, corner[1], axis=1)
-                 + bary[1] * np.take(vn, corner[2], axis=1))
-            s = s / np.maximum(norm(s), 1e-300)
-            s = np.where(dot(s, ng) < 0, -s, s)
-            ns = np.where(with_n, s, ng)
-        if with_uv.any():
-            t = self.vertex_uv
-            uv = (w0 * np.take(t, corner[0], axis=1) + bary[0] * np.take(t, corner[1], axis=1)
-                  + bary[1] * np.take(t, corner[2], axis=1))
+        if self.normal_map is not None:
+            with_n = self.face_has_normals[face]
+            if with_n.any():
+                s = self._apply(self.normal_map, face, p)
+                s = s / np.maximum(norm(s), 1e-300)
+                s = np.where(dot(s, ng) < 0, -s, s)
+                ns = s if with_n.all() else np.where(with_n, s, ng)
+        if self.uv_map is not None and self.face_has_uv[face].any():
+            uv = self._apply(self.uv_map, face, p)
         return ns, uv
 
     def spawn(self, p: np.ndarray, ng: np.ndarray, d: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:

@@ -181,11 +181,12 @@ class LightTable:
         return self.power[tri] / (self.dist.total * self.tris.area[tri])
 
     # -- next-event estimation ------------------------------------------------------------------
-    def importance(self, p: np.ndarray, eval_fn) -> np.ndarray | None:
-        """Per-cluster importance (K, n) at shading points ``p`` (3, n): Y of ``eval_fn(w)`` (the BSDF
-        times |cos| toward unit directions w (3, n)) times the cluster's power, its emitting-side
-        cosine (planar one-sided clusters) and 1 / max(d^2, r^2). None when power alone decides
-        (one cluster, or more than :data:`MAX_CLUSTERS`)."""
+    def importance(self, p: np.ndarray, density) -> np.ndarray | None:
+        """Per-cluster importance (K, n) at shading points ``p`` (3, n): ``density(w)`` (n,) toward unit
+        directions w (3, n) (the BSDF's sampling density, proportional to the luminance of f |cos| for
+        the materials here) times the cluster's power, its emitting-side cosine (planar one-sided
+        clusters) and 1 / max(d^2, r^2). None when power alone decides (one cluster, or more than
+        :data:`MAX_CLUSTERS`)."""
         k = self.clusters
         if k <= 1 or k > MAX_CLUSTERS:
             return None
@@ -197,7 +198,7 @@ class LightTable:
             g = self.cluster_power[i] / np.maximum(d2, self.radius[i] ** 2)
             if np.any(self.cluster_normal[:, i]):
                 g = g * np.maximum(-dot(w, self.cluster_normal[:, i:i + 1]), 0.0)
-            out[i] = luminance(eval_fn(w).T) * g
+            out[i] = density(w) * g
         return out
 
     def sample_direct(self, p: np.ndarray, u: np.ndarray, importance: np.ndarray | None = None):

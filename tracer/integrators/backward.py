@@ -250,7 +250,7 @@ class BackwardTracer(Integrator, PathMethod):
         data = lambda ok: {"owner": state.owner[ok], "rep": state.rep[ok], "sample": state.extra["sample"][ok]}  # noqa: E731
         if self.nee_lights:
             lights = self.lights
-            imp = lights.importance(it.p, lambda w: bsdf.eval(it, w, RADIANCE))
+            imp = lights.importance(it.p, lambda w: bsdf.pdf(it, w))
             tri, y, pdf_area = lights.sample_direct(it.p, rng.random((3, m)), imp)
             w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
             f = bsdf.eval(it, w, RADIANCE)
@@ -290,25 +290,23 @@ class BackwardTracer(Integrator, PathMethod):
         out = continue_by_sampling(state, it, bsdf, ctx, RADIANCE, nxt, sl)
         if self.splits == 0 or not (bsdf.delta and bsdf.flags & REFLECTION and bsdf.flags & TRANSMISSION):
             return out
-        k = np.flatnonzero(state.extra["splits"] < self.splits)
-        if len(k) == 0:
-            return out
-        sub, sst = it.take(k), state.take(k)
-        lobes = bsdf.lobes(sub, RADIANCE)
-        y = [luminance3(np.broadcast_to(weight, (3, len(k)))) for _, weight, _, _ in lobes]
-        both = np.minimum(y[0], y[1]) >= SPLIT_MIN * (y[0] + y[1])
-        if not np.any(both):
-            return out
-        nxt.alive[sl.start + k[both]] = False  # these paths go on as their branches
+        lobes = bsdf.lobes(it, RADIANCE)  # the branches the sample chose from (cached by the material)
+        m = len(it)
+        y = [luminance3(np.broadcast_to(weight, (3, m))) for _, weight, _, _ in lobes]
+        both = (np.minimum(y[0], y[1]) >= SPLIT_MIN * (y[0] + y[1])) & (state.extra["splits"] < self.splits)
         j = np.flatnonzero(both)
-        extra = {kk: v[j] for kk, v in sst.extra.items()}
+        if len(j) == 0:
+            return out
+        nxt.alive[sl.start + j] = False  # these paths go on as their branches
+        extra = {kk: v[j] for kk, v in state.extra.items()}
         extra["splits"] = extra["splits"] + 1
+        p, ng, off = np.take(it.p, j, axis=1), np.take(it.ng, j, axis=1), it.offset[j]
+        beta0 = np.take(state.beta, j, axis=1)
         for wo, weight, _flags, _label in lobes:
-            beta = np.take(sst.beta, j, axis=1) * np.take(np.broadcast_to(weight, (3, len(k))), j, axis=1)
             w = np.take(wo, j, axis=1)
-            o = self.world.accel.spawn(np.take(sub.p, j, axis=1), np.take(sub.ng, j, axis=1), w, sub.offset[j])
-            out.append(PathState(o, w, beta, sst.owner[j], sst.rep[j], np.zeros(len(j)), np.ones(len(j), bool),
-                                 dict(extra)))
+            beta = beta0 * np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
+            out.append(PathState(self.world.accel.spawn(p, ng, w, off), w, beta, state.owner[j], state.rep[j],
+                                 np.zeros(len(j)), np.ones(len(j), bool), dict(extra)))
         return out
 
     def potential(self, beta):

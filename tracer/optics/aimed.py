@@ -43,6 +43,10 @@ class CosineEmission:
     def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
         return np.maximum(dot(wo, it.ng), 0.0) / np.pi
 
+    def eval_pdf(self, it: Interaction, wo: np.ndarray, mode=None):
+        pdf = self.pdf(it, wo)
+        return np.broadcast_to(pdf, (3, len(it))), pdf
+
 
 class Aimed:
     """A material (or :class:`CosineEmission`) mixed with sampling toward targets.
@@ -80,30 +84,45 @@ class Aimed:
         return p
 
     def sample(self, it: Interaction, u: np.ndarray, mode) -> BSDFSample:
+        """u[0] chooses between the target (below the share) and the own law; u[1:1 + own.dims] drives the
+        own sample, the rest the target's. Each strategy runs only for the rays that chose it; the
+        other's density at the chosen direction makes the mixture pdf."""
         n = len(it)
         share, which, sign = self.share[it.slot], self.which[it.slot], self.sign[it.slot]
         aimed = u[0] < share
-        own = self.own.sample(it, u[1:1 + self.own.dims], mode)
-        wo = own.wo
+        own_idx, aim_idx = np.flatnonzero(~aimed), np.flatnonzero(aimed)
+        wo = np.empty((3, n))
+        f = np.zeros((3, n))
+        p_own = np.zeros(n)
         p_t = np.zeros(n)
+        own_flags = np.zeros(n, np.int8)
+        if hasattr(self.own, "prepare"):
+            self.own.prepare(it)  # frames once, for both subsets
+        if len(own_idx):
+            sub = it if len(own_idx) == n else it.take(own_idx)
+            s = self.own.sample(sub, u[1:1 + self.own.dims, own_idx], mode)
+            wo[:, own_idx] = s.wo
+            p_own[own_idx] = s.pdf
+            own_flags[own_idx] = s.flags
+            f[:, own_idx] = self.own.eval(sub, s.wo, mode)
         ut = u[1 + self.own.dims:]
         for k, target in enumerate(self.targets):
-            sel = np.flatnonzero(which == k)
-            if not len(sel):
-                continue
-            a = aimed[sel]
-            d_t, pt = target.sample(np.take(it.p, sel, axis=1), np.take(ut[:target.dims], sel, axis=1))
-            wo[:, sel] = np.where(a, d_t * sign[sel], wo[:, sel])
-            p_t[sel] = np.where(a, pt, 0.0)
-            back = sel[~a]
+            sel = aim_idx[which[aim_idx] == k]
+            if len(sel):
+                d_t, pt = target.sample(np.take(it.p, sel, axis=1), np.take(ut[:target.dims], sel, axis=1))
+                wo[:, sel] = d_t * sign[sel]
+                p_t[sel] = pt
+            back = own_idx[which[own_idx] == k]
             if len(back):  # the target strategy's density at the own samples' directions
                 p_t[back] = target.pdf(np.take(it.p, back, axis=1), np.take(wo, back, axis=1) * sign[back])
-        p_own = np.where(aimed, self.own.pdf(it, wo), own.pdf)
+        if len(aim_idx):  # the own law's value and density at the aimed directions
+            sub = it if len(aim_idx) == n else it.take(aim_idx)
+            f[:, aim_idx], p_own[aim_idx] = self.own.eval_pdf(sub, np.take(wo, aim_idx, axis=1), mode)
         mix = share * p_t + (1.0 - share) * p_own
-        valid = np.where(aimed, p_t > 0, own.flags != 0) & (mix > 0)
-        weight = np.where(valid, self.own.eval(it, wo, mode) / np.where(valid, mix, 1.0), 0.0)
+        valid = np.where(aimed, p_t > 0, own_flags != 0) & (mix > 0)
+        weight = np.where(valid, f / np.where(valid, mix, 1.0), 0.0)
         through = dot(wo, it.ng) * dot(it.d, it.ng) > 0
-        flags = np.where(valid, np.where(aimed, np.where(through, TRANSMISSION, REFLECTION), own.flags), 0)
+        flags = np.where(valid, np.where(aimed, np.where(through, TRANSMISSION, REFLECTION), own_flags), 0)
         return BSDFSample(wo, weight, np.where(valid, mix, 0.0), flags.astype(np.int8))
 
     def eval(self, it: Interaction, wo: np.ndarray, mode) -> np.ndarray:

@@ -65,15 +65,28 @@ class Interaction:
         return self.cache["side"]
 
     def take(self, idx: np.ndarray) -> Interaction:
-        """The interaction of rays ``idx`` only."""
+        """The interaction of rays ``idx`` only, with what the materials cached for them."""
+        n = len(self)
         t = lambda a: None if a is None else np.take(a, idx, axis=-1)  # noqa: E731
-        return Interaction(t(self.d), t(self.p), t(self.ng), t(self.ns), t(self.uv), self.slot[idx], t(self.offset))
+
+        def part(v):
+            if isinstance(v, tuple):
+                return tuple(part(x) for x in v)
+            return t(v) if isinstance(v, np.ndarray) and v.shape[-1] == n and v.ndim >= 1 else v
+
+        ns = t(self.ns) if self.ns is not self.ng else None
+        ng = t(self.ng)
+        out = Interaction(t(self.d), t(self.p), ng, ns if ns is not None else ng, t(self.uv), self.slot[idx],
+                          t(self.offset))
+        out.cache = {k: part(v) for k, v in self.cache.items()}
+        return out
 
 
 @dataclass
 class BSDFSample:
-    """Outgoing directions wo (3, n), weights f |cos| / pdf (3, n) (0 where absorbed), pdf (n,) per sr
-    (0 for delta lobes and absorbed samples), lobe flags (n,) int8 of the sampled lobe (0: absorbed)."""
+    """Outgoing directions wo (3, n), weights f |cos| / pdf (3, n), or an array that broadcasts to it
+    ((3, 1) for one RGB factor, (1, n) for a grey one; 0 where absorbed), pdf (n,) per sr (0 for delta
+    lobes and absorbed samples), lobe flags (n,) int8 of the sampled lobe (0: absorbed)."""
 
     wo: np.ndarray
     weight: np.ndarray
@@ -127,6 +140,13 @@ class BSDF:
 
     def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
         return np.zeros(len(it))
+
+    def eval_pdf(self, it: Interaction, wo: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray]:
+        """(eval, pdf) together; materials whose two share work override it."""
+        return self.eval(it, wo, mode), self.pdf(it, wo)
+
+    def prepare(self, it: Interaction):
+        """Compute what later calls on ``it`` or on its subsets (Interaction.take) share (local frames)."""
 
     def lobes(self, it: Interaction, mode: str) -> list[tuple[np.ndarray, np.ndarray, int, str]]:
         """Every delta branch: [(wo (3, n), weight (3, n), flags, label)] (purely specular materials)."""

@@ -50,6 +50,8 @@ def mirror_directions(it: Interaction) -> np.ndarray:
     """Specular reflection about the shading normal; where an interpolated normal would send the
     ray through the mesh, about the geometric normal instead. (3, n)."""
     out = reflect(it.d, it.ns)
+    if it.ns is it.ng:
+        return out  # flat: the reflection is on the incident side by construction
     wrong = dot(out, it.ng) * dot(it.d, it.ng) > 0
     if np.any(wrong):
         out = np.where(wrong, reflect(it.d, it.ng), out)
@@ -90,12 +92,10 @@ class Mirror(BSDF):
 
     def sample(self, it, u, mode):
         n = len(it)
-        return BSDFSample(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, n)).copy(),
-                          np.zeros(n), np.full(n, self.flags, np.int8))
+        return BSDFSample(mirror_directions(it), self.gather(self.r, it), np.zeros(n), np.full(n, self.flags, np.int8))
 
     def lobes(self, it, mode):
-        return [(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, len(it))), self.flags,
-                 "reflect")]
+        return [(mirror_directions(it), self.gather(self.r, it), self.flags, "reflect")]
 
 
 @material
@@ -134,32 +134,37 @@ class Dielectric(BSDF):
             it.cache["fresnel"] = (side, n_face, eta, cos_i, r, cos_t)
         return it.cache["fresnel"]
 
-    def _directions(self, it, refl: np.ndarray):
-        """Reflected or refracted directions (by ``refl``, (n,) bool), kept on the side the event
-        says where the shading normal disagrees with the geometric one."""
-        side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-        out = np.where(refl, reflect(it.d, n_face), refract(it.d, n_face, eta, cos_i, cos_t))
-        want = np.where(refl, side, -side)
-        bad = np.sign(dot(out, it.ng)) != want
-        if np.any(bad):
-            out = np.where(bad, np.where(refl, reflect(it.d, it.ng), it.d), out)
-        return out
+    def _branches(self, it) -> tuple[np.ndarray, np.ndarray]:
+        """(reflected, refracted) directions of every ray, computed once per interaction; on smooth
+        objects, a branch that the shading normal would send to the wrong side of the geometric one
+        is replaced (reflection about the geometric normal, or the straight continuation)."""
+        if "branches" not in it.cache:
+            side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
+            refl = reflect(it.d, n_face)
+            refr = refract(it.d, n_face, eta, cos_i, cos_t)
+            if it.ns is not it.ng:
+                bad = np.sign(dot(refl, it.ng)) != side  # side: the incident side, +1 (front) or -1
+                if np.any(bad):
+                    refl = np.where(bad, reflect(it.d, it.ng), refl)
+                bad = np.sign(dot(refr, it.ng)) != -side
+                if np.any(bad):
+                    refr = np.where(bad, it.d, refr)
+            it.cache["branches"] = (refl, refr)
+        return it.cache["branches"]
 
     def sample(self, it, u, mode):
         side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
         refl = u[0] < r
-        w = np.ones(len(it)) if mode != RADIANCE else np.where(refl, 1.0, 1.0 / (eta * eta))
+        w = 1.0 if mode != RADIANCE else np.where(refl, 1.0, 1.0 / (eta * eta))
         flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
-        return BSDFSample(self._directions(it, refl), np.broadcast_to(w, (3, len(it))).copy(), np.zeros(len(it)),
-                          flags)
+        d_r, d_t = self._branches(it)
+        return BSDFSample(np.where(refl, d_r, d_t), np.broadcast_to(w, (1, len(it))), np.zeros(len(it)), flags)
 
     def lobes(self, it, mode):
         side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-        n = len(it)
         t = 1.0 - r if mode != RADIANCE else (1.0 - r) / (eta * eta)
-        return [(self._directions(it, np.ones(n, bool)), np.broadcast_to(r, (3, n)), DELTA | REFLECTION, "reflect"),
-                (self._directions(it, np.zeros(n, bool)), np.broadcast_to(t, (3, n)), DELTA | TRANSMISSION,
-                 "refract")]
+        d_r, d_t = self._branches(it)
+        return [(d_r, r[None], DELTA | REFLECTION, "reflect"), (d_t, t[None], DELTA | TRANSMISSION, "refract")]
 
 
 @material
@@ -189,13 +194,11 @@ class Coating(BSDF):
         r, t = self.gather(self.r, it), self.gather(self.t, it)
         w = np.where(refl, r / np.maximum(p, 1e-300), t / np.maximum(1.0 - p, 1e-300))
         flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
-        return BSDFSample(out, np.broadcast_to(w, (3, n)).copy(), np.zeros(n), flags)
+        return BSDFSample(out, w, np.zeros(n), flags)
 
     def lobes(self, it, mode):
-        n = len(it)
-        return [(mirror_directions(it), np.broadcast_to(self.gather(self.r, it), (3, n)), DELTA | REFLECTION,
-                 "reflect"),
-                (it.d, np.broadcast_to(self.gather(self.t, it), (3, n)), DELTA | TRANSMISSION, "transmit")]
+        return [(mirror_directions(it), self.gather(self.r, it), DELTA | REFLECTION, "reflect"),
+                (it.d, self.gather(self.t, it), DELTA | TRANSMISSION, "transmit")]
 
 
 @material
@@ -217,31 +220,51 @@ class LCD(BSDF):
                            description="Clear-cell over black-cell transmittance")))
     flags = DELTA | TRANSMISSION
 
+    def __init__(self, objects):
+        super().__init__(objects)
+        #: Per object: (image height, width, (3, H W) cells relative to a clear cell, row-major from the top).
+        self.cells = []
+        for o in objects:
+            p = o.material.params
+            img, cr = p["image"], p["contrast_ratio"]
+            h, w = img.shape[:2]
+            rel = 1.0 / cr + (1.0 - 1.0 / cr) * img.reshape(h * w, 3).T
+            self.cells.append((h, w, np.ascontiguousarray(rel), p["transmittance"].reshape(3, 1)))
+
+    def _lookup(self, it: Interaction, absolute: bool) -> np.ndarray:
+        """(3, n) cell values at the rays' texture coordinates (OBJ convention: v up), relative to a
+        clear cell or (``absolute``) times the clear cell's transmittance."""
+        key = "lcd_abs" if absolute else "lcd_rel"
+        if key in it.cache:
+            return it.cache[key]
+        out = None
+        for i, (h, w, rel, t_open) in enumerate(self.cells):
+            sel = slice(None) if len(self.cells) == 1 else np.flatnonzero(self.local[it.slot] == i)
+            uv = it.uv[:, sel]
+            x = np.clip((uv[0] * w).astype(np.int64), 0, w - 1)  # uv >= 0: truncation is floor
+            y = np.clip(((1.0 - uv[1]) * h).astype(np.int64), 0, h - 1)
+            cell = np.take(rel, y * w + x, axis=1)
+            if absolute:
+                cell = cell * t_open
+            if len(self.cells) == 1:
+                out = cell
+            else:
+                out = np.empty((3, len(it))) if out is None else out
+                out[:, sel] = cell
+        it.cache[key] = out
+        return out
+
     def modulation(self, it: Interaction) -> np.ndarray:
         """(3, n) transmittance relative to a clear cell, in [1/CR, 1]."""
-        out = np.empty((3, len(it)))
-        for i, o in enumerate(self.objects):
-            sel = self.local[it.slot] == i
-            if not np.any(sel):
-                continue
-            p = o.material.params
-            img = p["image"]
-            h, w = img.shape[:2]
-            uv = it.uv[:, sel]
-            x = np.clip(np.floor(uv[0] * w).astype(np.int64), 0, w - 1)
-            y = np.clip(np.floor((1.0 - uv[1]) * h).astype(np.int64), 0, h - 1)
-            cell = img[y, x].T
-            cr = p["contrast_ratio"]
-            out[:, sel] = 1.0 / cr + (1.0 - 1.0 / cr) * cell
-        return out
+        return self._lookup(it, False)
 
     def transmittance(self, it: Interaction) -> np.ndarray:
         """(3, n) RGB transmittance at the rays' texture coordinates (OBJ convention: v up)."""
-        return self.gather(self.table("transmittance"), it) * self.modulation(it)
+        return self._lookup(it, True)
 
     def sample(self, it, u, mode):
         n = len(it)
-        return BSDFSample(it.d.copy(), self.transmittance(it), np.zeros(n), np.full(n, self.flags, np.int8))
+        return BSDFSample(it.d, self.transmittance(it), np.zeros(n), np.full(n, self.flags, np.int8))
 
     def lobes(self, it, mode):
         return [(it.d, self.transmittance(it), self.flags, "transmit")]
@@ -361,6 +384,13 @@ class GaussianDiffuser(BSDF):
 
     def eval(self, it, wo, mode):
         return self.gather(self.tau, it) * self.pdf(it, wo)
+
+    def eval_pdf(self, it, wo, mode):
+        pdf = self.pdf(it, wo)
+        return self.gather(self.tau, it) * pdf, pdf
+
+    def prepare(self, it):
+        self._beta0(it)
 
 
 def make_materials(objects: list) -> list[BSDF]:
