@@ -38,7 +38,7 @@ from ..sampling import uniform_disk_concentric
 from ..schema import Field
 from ..units import luminance3
 from ..vec import dot
-from .base import DEFAULT_BATCH, MAX_DEPTH, Integrator, register
+from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
 
 #: Strata whose acceptance by rejection sampling would be below this are not worth stratifying.
@@ -176,8 +176,9 @@ class BackwardTracer(Integrator, PathMethod):
         xy[:, ~in_p] = self._disk_part(rng, n - k, center, radius, False)
         return xy, np.where(in_p, area_p / share, area_rest / (1.0 - share))
 
-    def camera_paths(self, rng: np.random.Generator, pix: np.ndarray, rep: np.ndarray) -> PathState:
-        """One sample through each of the pixels ``pix`` (n,), in replicates ``rep`` (n,)."""
+    def camera_paths(self, rng: np.random.Generator, pix: np.ndarray, rep: np.ndarray, first: int = 0) -> PathState:
+        """One sample through each of the pixels ``pix`` (n,), in replicates ``rep`` (n,); the samples are
+        numbered from ``first``."""
         eye = self.eye
         w, h = eye.width, eye.height
         n = len(pix)
@@ -188,12 +189,15 @@ class BackwardTracer(Integrator, PathMethod):
         o, d, geo = eye.generate_rays(sx, sy, lens)
         beta = np.broadcast_to(geo * eye.pixel_area * lens_weight / eye.extent[pix], (3, n)).copy()
         return PathState(o, d, beta, pix, rep, np.zeros(n), np.ones(n, bool),
-                         {"sample": np.arange(n), "splits": np.zeros(n, np.int8)})
+                         {"sample": np.arange(first, first + n), "splits": np.zeros(n, np.int8)})
 
     def _run(self, ctx, pix, rep) -> int:
-        state = self.camera_paths(ctx.rng, pix, rep)
+        """Trace one sample through each of ``pix``, in waves of :data:`WAVE`; the samples that found light."""
         ctx.sample_found = np.zeros(len(pix), bool)
-        self.truncated += trace(self, state, ctx, self.max_depth)
+        for a in range(0, len(pix), WAVE):
+            b = min(a + WAVE, len(pix))
+            state = self.camera_paths(ctx.rng, pix[a:b], rep[a:b], a)
+            self.truncated += trace(self, state, ctx, self.max_depth)
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):

@@ -27,8 +27,12 @@ from ..validate import FieldChecker
 from ..world import World
 from .path import Context, Roulette, Timers
 
-#: Rays per batch (structure of arrays, one Embree call per bounce).
+#: Paths per batch: the unit of work that is seed-addressed, distributed and merged.
 DEFAULT_BATCH = 1 << 17
+#: Paths traced together through the loop (one Embree call per bounce): a batch runs in waves of this
+#: many, so that the planes of a wave stay in the processor's caches (large waves made every
+#: elementwise operation stream from memory, and two processes contend for it).
+WAVE = 1 << 16
 #: The random stream of a method's pilot (the roulette's reference luminance): (seed, PILOT_STREAM).
 PILOT_STREAM = 2**31 - 1
 #: Paths in a pilot.

@@ -19,7 +19,7 @@ import numpy as np
 from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..units import luminance3
-from .base import DEFAULT_BATCH, MAX_DEPTH, Integrator, register
+from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, continue_by_sampling, trace
 
 #: Replicates per batch: particles are dealt round-robin into this many groups (tracer.film).
@@ -63,9 +63,9 @@ class ForwardTracer(Integrator, PathMethod):
         self.recorder: list | None = None
 
     # -- emission --------------------------------------------------------------------------------
-    def emit(self, rng: np.random.Generator, n: int) -> PathState:
-        """n particles leaving the lights: a state with flux weights (cd/m^2 mm^2 sr); particles whose
-        direction sample failed are dropped."""
+    def emit(self, rng: np.random.Generator, n: int, first: int = 0) -> PathState:
+        """n particles leaving the lights, numbered from ``first``: a state with flux weights
+        (cd/m^2 mm^2 sr); particles whose direction sample failed are dropped."""
         lights = self.lights
         tri, points, normal, pdf_pos = lights.sample_emission(rng.random((4, n)))
         it = Interaction(-normal, points, normal, normal, None, lights.slot[tri])
@@ -74,16 +74,18 @@ class ForwardTracer(Integrator, PathMethod):
         alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
         wo = np.take(s.wo, alive, axis=1)
         o = self.world.accel.spawn(np.take(points, alive, axis=1), np.take(normal, alive, axis=1), wo)
-        self._record(alive, np.take(points, alive, axis=1), np.zeros(len(alive), bool))
-        return PathState(o, wo, np.take(beta, alive, axis=1), alive, alive % REPLICATES, s.pdf[alive],
+        pid = first + alive
+        self._record(pid, np.take(points, alive, axis=1), np.zeros(len(alive), bool))
+        return PathState(o, wo, np.take(beta, alive, axis=1), pid, pid % REPLICATES, s.pdf[alive],
                          np.zeros(len(alive), bool))
 
     def run_batch(self, ctx):
         n = self.batch_size
         if self.lights.total_flux_lm <= 0 or self.world.accel is None:
             return n, 0, {"light": n}, REPLICATES
-        state = self.emit(ctx.rng, n)
-        self.truncated += trace(self, state, ctx, self.max_depth)
+        for a in range(0, n, WAVE):
+            state = self.emit(ctx.rng, min(WAVE, n - a), a)
+            self.truncated += trace(self, state, ctx, self.max_depth)
         return n, ctx.found, {"light": n}, REPLICATES
 
     def pilot_mean(self, ctx) -> float:

@@ -294,14 +294,15 @@ def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl
     return []
 
 
-def _compact(method: PathMethod, st: PathState, nxt: Next, ctx) -> PathState:
-    """The paths that go on after a bounce: roulette on the living ones of ``nxt`` (sorted order), then
-    one compaction."""
+def _compact(method: PathMethod, st: PathState, nxt: Next, ctx, splits: list[PathState]) -> PathState:
+    """The paths that go on after a bounce: roulette on the living ones of ``nxt`` (sorted order) and
+    on the paths that splitting added (``splits``), then one compaction of both into the next state."""
     alive = nxt.alive
     beta = nxt.beta
-    if ctx.roulette is not None and ctx.roulette.threshold > 0:
+    roulette = ctx.roulette if ctx.roulette is not None and ctx.roulette.threshold > 0 else None
+    if roulette is not None:
         live = np.flatnonzero(alive)
-        q = ctx.roulette.survival(method.potential(np.take(beta, live, axis=1)))
+        q = roulette.survival(method.potential(np.take(beta, live, axis=1)))
         low = np.flatnonzero(q < 1.0)
         if len(low):
             idx = live[low]
@@ -309,9 +310,33 @@ def _compact(method: PathMethod, st: PathState, nxt: Next, ctx) -> PathState:
             alive[idx[~keep]] = False
             beta[:, idx[keep]] *= 1.0 / np.maximum(q[low][keep], 1e-300)
     keep = np.flatnonzero(alive)
-    t2 = lambda a: np.take(a, keep, axis=1)  # noqa: E731
-    return PathState(t2(nxt.o), t2(nxt.d), t2(beta), st.owner[keep], st.rep[keep], nxt.pdf[keep],
-                     nxt.specular[keep], {k: v[keep] for k, v in st.extra.items()})
+    if splits:
+        extra = PathState.concat(splits)
+        if roulette is not None:
+            extra = roulette.apply(extra, method.potential(extra.beta), ctx.rng)
+        parts = [(nxt, keep), (extra, None)]
+    else:
+        parts = [(nxt, keep)]
+    k = len(keep)
+    n = k + (len(parts[1][0]) if len(parts) > 1 else 0)
+    out = PathState(np.empty((3, n)), np.empty((3, n)), np.empty((3, n)), np.empty(n, np.int64),
+                    np.empty(n, np.int64), np.empty(n), np.empty(n, bool),
+                    {key: np.empty(n, v.dtype) for key, v in st.extra.items()})
+    for name in ("o", "d", "beta"):
+        np.take(getattr(nxt, name), keep, axis=1, out=getattr(out, name)[:, :k])
+    for name, src in (("pdf", nxt.pdf), ("specular", nxt.specular), ("owner", st.owner), ("rep", st.rep)):
+        np.take(src, keep, out=getattr(out, name)[:k])
+    for key, v in st.extra.items():
+        np.take(v, keep, out=out.extra[key][:k])
+    if len(parts) > 1:
+        e = parts[1][0]
+        for name in ("o", "d", "beta"):
+            getattr(out, name)[:, k:] = getattr(e, name)
+        for name in ("pdf", "specular", "owner", "rep"):
+            getattr(out, name)[k:] = getattr(e, name)
+        for key in st.extra:
+            out.extra[key][k:] = e.extra[key]
+    return out
 
 
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) -> int:
@@ -388,10 +413,5 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             with timers("shade"):
                 method.deliver(sh, ~blocked, ctx)
         with timers("shade"):
-            state = _compact(method, st, nxt, ctx)
-            if splits:
-                extra = PathState.concat(splits)
-                if ctx.roulette is not None:
-                    extra = ctx.roulette.apply(extra, method.potential(extra.beta), ctx.rng)
-                state = PathState.concat([state, extra])
+            state = _compact(method, st, nxt, ctx, splits)
     return len(state)
