@@ -105,9 +105,9 @@ def test_chi2_next_event_points_against_their_density(with_importance):
     test = ChiSquareTest(((0.0, 3.0), (0.0, 1.0)), (24, 8), sample, density, 300_000, seed=5)
     ok, msg = test.run(0.01, CHI2_TESTS)
     assert ok, msg
-    # The reported pdf equals that density at the sampled points.
+    # The reported pdf equals that density at the sampled points (the importance is float32).
     k, s, t, pdf = sample.pdf_area
-    np.testing.assert_allclose(pdf * sizes[k] ** 2, density(k + s, t), rtol=1e-9)
+    np.testing.assert_allclose(pdf * sizes[k] ** 2, density(k + s, t), rtol=1e-6)
 
 
 def test_next_event_estimates_the_illuminance_of_a_small_source():
@@ -196,4 +196,4 @@ def test_chi2_cosine_emission():
     adapter = SurfaceAdapter(CosineEmission(), (0.0, 0.0, -1.0), (0.3, -0.2, 1.0), mode="importance")
     ok, msg = adapter.test(seed=11).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-9
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)

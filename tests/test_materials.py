@@ -196,7 +196,7 @@ def test_chi2_every_non_delta_material(mtype, spec, d, bounds):
     kw = {"bounds": bounds} if bounds else {}
     ok, msg = adapter.test(seed=hash(mtype) % 1000, **kw).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-9
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
 
 
 def test_every_registered_non_delta_material_has_a_chi2_case():
@@ -216,12 +216,12 @@ def test_chi2_aimed_mixture_at_a_surface_and_at_an_emitter():
     adapter = SurfaceAdapter(aimed, (0.2, -0.1, -1.0), (0.0, 0.0, 1.0), mode=IMPORTANCE)
     ok, msg = adapter.test(seed=41).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-9
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
     emitter = Aimed(CosineEmission(), {0: (target, 0.7, "toward")}, 1)
     adapter = SurfaceAdapter(emitter, (0.0, 0.0, -1.0), (0.0, 0.0, 1.0), mode=IMPORTANCE)
     ok, msg = adapter.test(seed=42).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-9
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
 
 
 def test_chi2_adapter_rejects_a_wrong_pdf():

@@ -20,7 +20,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import cross, dot, max3, norm
+from .vec import F32, cross, dot, max3, norm
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -83,9 +83,11 @@ class Accelerator:
         c = cross(self.e1, self.e2)
         length = norm(c)
         self.normal = c / np.where(length > 0, length, 1.0)
-        #: Plane offsets n . v0 (mm) of every face, with one more entry for misses (face -1).
-        self.plane = np.append(dot(self.normal, self.v0), 0.0)
-        self.normal_ext = np.concatenate([self.normal, np.zeros((3, 1))], axis=1)
+        #: The unit normals in float32 (directions are float32: tracer.vec), with one more zero column
+        #: for misses (face -1), and the plane offsets n . v0 (mm, float64) of these float32 normals.
+        self.normal32 = self.normal.astype(F32)
+        self.normal_ext = np.concatenate([self.normal32, np.zeros((3, 1), F32)], axis=1)
+        self.plane = np.append(dot(self.normal32.astype(np.float64), self.v0), 0.0)
         #: Spawn offset of every face (mm, and 0 for misses): OFFSET_SCALE (1 + the largest coordinate of
         #: its corners relative to the scene's centre), so that float32 Embree resolves it.
         corner_extent = np.abs(tri - self.center).max(axis=(1, 2))
@@ -136,10 +138,12 @@ class Accelerator:
         return o32, d32
 
     def intersect(self, o: np.ndarray, d: np.ndarray) -> Hits:
-        """Closest hits of rays (origins (3, n) mm, unit directions (3, n)); one Embree call.
+        """Closest hits of rays (origins (3, n) mm float64, unit directions (3, n) float32); one Embree call.
 
-        The distance is refined in float64 against the hit triangle's plane, t = (n . v0 - n . o) / (n . d)
-        (Embree's float32 t is off by ~1e-7 |t|); where the ray grazes the plane, Embree's own t stays."""
+        The distance is refined against the hit triangle's plane, t = (n . v0 - n . o) / (n . d), the
+        numerator in float64, so the hit point o + t d lies on the plane to float64 precision whatever
+        Embree's float32 t (off by ~1e-7 |t| and dependent on its BVH); where the ray grazes the plane,
+        Embree's own t stays."""
         n = o.shape[1]
         self.rays_traced += n
         if n == 0:
@@ -150,7 +154,7 @@ class Accelerator:
         ng = np.take(self.normal_ext, face, axis=1)  # face -1 (a miss) takes the zero column
         denom = dot(d, ng)
         ok = np.abs(denom) > 1e-9
-        t = (np.take(self.plane, face) - dot(o, ng)) / np.where(ok, denom, 1.0)
+        t = (np.take(self.plane, face) - (o[0] * ng[0] + o[1] * ng[1] + o[2] * ng[2])) / np.where(ok, denom, 1)
         if not ok.all():
             t = np.where(ok, t, res["tfar"].astype(np.float64))
             t[face < 0] = np.inf
@@ -164,7 +168,7 @@ class Accelerator:
         if n == 0:
             return np.zeros(0, bool)
         o32, d32 = self._rays32(o, d)
-        tm = np.ascontiguousarray(np.minimum(tmax, 3.0e38), dtype=np.float32)
+        tm = np.minimum(tmax, 3.0e38).astype(np.float32)
         return self._scene.run(o32, d32, dists=tm, query="OCCLUDED") == 0
 
     def barycentrics(self, face: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -178,18 +182,19 @@ class Accelerator:
         return np.stack([(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det])
 
     def shading(self, face: np.ndarray, p: np.ndarray, ng: np.ndarray):
-        """Shading normals (3, n) (interpolated vertex normals on the side of ``ng``; ``ng`` itself for
-        flat objects) and texture coordinates (2, n) or None, at points ``p`` on faces ``face``."""
+        """Shading normals (3, n) float32 (interpolated vertex normals on the side of ``ng``; ``ng``
+        itself for flat objects) and texture coordinates (2, n) float32 or None, at points ``p`` on
+        faces ``face``."""
         ns, uv = ng, None
         if self.normal_map is not None:
             with_n = self.face_has_normals[face]
             if with_n.any():
                 s = self._apply(self.normal_map, face, p)
-                s = s / np.maximum(norm(s), 1e-300)
+                s = (s * (1.0 / np.maximum(norm(s), 1e-300))).astype(F32)
                 s = np.where(dot(s, ng) < 0, -s, s)
                 ns = s if with_n.all() else np.where(with_n, s, ng)
         if self.uv_map is not None and self.face_has_uv[face].any():
-            uv = self._apply(self.uv_map, face, p)
+            uv = self._apply(self.uv_map, face, p).astype(F32)
         return ns, uv
 
     def spawn(self, p: np.ndarray, ng: np.ndarray, d: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:

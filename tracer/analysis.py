@@ -29,7 +29,7 @@ from .optics.bsdf import RADIANCE
 from .optics.materials import LCD
 from .sampling import make_rng
 from .units import luminance3
-from .vec import dot, norm
+from .vec import F32, dot, norm
 
 #: The analysis drops branches whose transfer factor falls below this fraction (of the brightest
 #: source's luminance: the roulette's reference is MIN_FACTOR / Roulette.EPSILON of it).
@@ -104,7 +104,7 @@ class ChiefRays(PathMethod):
                 p = np.take(it.p, ii, axis=1)
                 v = np.take(qp, kk, axis=1) - p
                 dist = norm(v)
-                w = v / dist  # toward the light point
+                w = (v / dist).astype(F32)  # toward the light point
                 cos_e = -dot(w, np.take(qn, kk, axis=1))
                 blocked = accel.occluded(*segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1),
                                                      it.offset[ii]))
@@ -167,7 +167,8 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         o, d, _ = eye.generate_rays(sx[pixels % w], sy[pixels // w], np.zeros((2, len(pixels))))
     n = len(pixels)
     method = ChiefRays(world)
-    state = PathState(o, d, np.ones((3, n)), np.arange(n), np.zeros(n, np.int64), np.zeros(n), np.ones(n, bool),
+    state = PathState(o, d.astype(F32), np.ones((3, n), F32), np.arange(n), np.zeros(n, np.int64), np.zeros(n, F32),
+                      np.ones(n, bool),
                       {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)})
     ctx = Context(world, make_rng(0), Timers(), Splats(), Roulette(MIN_FACTOR / Roulette.EPSILON * method.max_lum))
     trace(method, state, ctx, max_depth)

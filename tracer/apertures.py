@@ -15,7 +15,7 @@ import numpy as np
 
 from .accel import Accelerator
 from .sampling import Distribution1D, TriangleSet, disk_aperture_pdf, sample_disk_aperture
-from .vec import dot, norm
+from .vec import F32, dot, norm
 
 
 class DiskTarget:
@@ -27,12 +27,12 @@ class DiskTarget:
         self.center, self.normal, self.radius = center, normal, radius
 
     def sample(self, origins: np.ndarray, u: np.ndarray):
-        """(directions (3, n), pdf per sr (n,)) toward uniform points of the disk; u is (2, n)."""
-        d, _, pdf = sample_disk_aperture(origins, self.center, self.normal, self.radius, u)
-        return d, pdf
+        """(directions (3, n) float32, pdf per sr (n,) float32) toward uniform points of the disk; u is (2, n)."""
+        d, _, pdf = sample_disk_aperture(origins, self.center, self.normal, self.radius, u.astype(np.float64))
+        return d.astype(F32), pdf.astype(F32)
 
     def pdf(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        return disk_aperture_pdf(origins, dirs, self.center, self.normal, self.radius)
+        return disk_aperture_pdf(origins, dirs.astype(np.float64), self.center, self.normal, self.radius).astype(F32)
 
 
 class MeshTarget:
@@ -56,19 +56,19 @@ class MeshTarget:
         return self._accel.rays_traced
 
     def sample(self, origins: np.ndarray, u: np.ndarray):
-        """(directions (3, n), pdf per sr (n,)) toward uniform points of the mesh; u is (3, n)."""
+        """(directions (3, n) float32, pdf per sr (n,) float32) toward uniform points of the mesh; u is (3, n)."""
         tri, _ = self._dist.sample(u[0])
-        v = self.tris.point(tri, u[1:3]) - origins
+        v = self.tris.point(tri, u[1:3].astype(np.float64)) - origins
         dist = norm(v)
-        d = v / np.maximum(dist, 1e-300)
+        d = v * (1.0 / np.maximum(dist, 1e-300))
         cos = np.abs(dot(d, self.normal))
         ok = (cos > 1e-9) & (dist > 0)
         pdf = np.where(ok, dist * dist / (self.area * np.where(ok, cos, 1.0)), 0.0)
-        return d, pdf
+        return d.astype(F32), pdf.astype(F32)
 
     def pdf(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        hits = self._accel.intersect(origins, dirs)
-        cos = np.abs(dot(dirs, self.normal))
+        hits = self._accel.intersect(origins, dirs.astype(F32, copy=False))
+        cos = np.abs(dot(dirs.astype(np.float64), self.normal))
         ok = hits.hit & (cos > 1e-9)
         t = np.where(ok, hits.t, 0.0)
-        return np.where(ok, t * t / (self.area * np.where(ok, cos, 1.0)), 0.0)
+        return np.where(ok, t * t / (self.area * np.where(ok, cos, 1.0)), 0.0).astype(F32)

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
-from .vec import dot, normalize
+from .vec import F32, dot, normalize
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -128,7 +128,8 @@ class ThinLensEye:
 
         Returns
         -------
-        origins (3, n), directions (3, n) unit, world space; cos^4(theta) / f^2 (n,), 1/mm^2.
+        origins (3, n) float64, directions (3, n) float32 unit, world space; cos^4(theta) / f^2 (n,)
+        float32, 1/mm^2.
         """
         f, s = self.focal, self.accommodation
         if math.isinf(s):
@@ -138,7 +139,7 @@ class ThinLensEye:
         d_local = normalize(d_local)
         origins = self._pos + lens_xy[0] * self._right + lens_xy[1] * self._up
         cos2 = d_local[2] * d_local[2]
-        return origins, self.to_world(d_local), cos2 * cos2 / (f * f)
+        return origins, self.to_world(d_local).astype(F32), (cos2 * cos2 / (f * f)).astype(F32)
 
     # -- forward: scene -> retina ---------------------------------------------------------------
     def pupil_hit(self, origins: np.ndarray, dirs: np.ndarray):

@@ -32,7 +32,7 @@ import numpy as np
 from .sampling import Distribution1D, TriangleSet
 from .schema import Field, Schema
 from .units import MM2_TO_M2, lambertian_luminance_cd_m2, luminance, normalize_color
-from .vec import dot, norm
+from .vec import F32, dot, norm
 
 #: Importance-driven cluster choice is used up to this many emitting objects (beyond it, power alone).
 MAX_CLUSTERS = 32
@@ -137,6 +137,14 @@ class LightTable:
             if not o.emission.two_sided and np.all(dot(nrm, nrm[:, :1]) > 1 - 1e-9):
                 self.cluster_normal[:, i] = nrm[:, 0]
         self.cdf = np.cumsum(self.power)
+        self._planar = np.any(self.cluster_normal != 0, axis=0)
+        #: Float32 copies for the shading side (tracer.vec): normals (3, T), radiance (3, T), clusters.
+        self.normal32 = self.tris.normal.astype(F32)
+        self.radiance32 = self.radiance.astype(F32)
+        self._centre32 = self.centre.astype(F32)
+        self._cnormal32 = self.cluster_normal.astype(F32)
+        self._cpower32 = self.cluster_power.astype(F32)
+        self._r2_32 = (self.radius * self.radius).astype(F32)
 
     def __len__(self) -> int:
         return len(self.power)
@@ -156,11 +164,11 @@ class LightTable:
 
     # -- emission (forward) ---------------------------------------------------------------------
     def sample_emission(self, u: np.ndarray):
-        """Particles' starting points: u (4, n) -> (light triangles (n,), points (3, n) mm, normals
+        """Particles' starting points: u (4, n) -> (light triangles (n,), points (3, n) mm, float32 normals
         (3, n) on the emitting side, area density (n,) mm^-2 of point and side together)."""
         tri, pmf = self.dist.sample(u[0])
         points = self.tris.point(tri, u[1:3])
-        normal = np.take(self.tris.normal, tri, axis=1)
+        normal = np.take(self.normal32, tri, axis=1)
         pdf = pmf / self.tris.area[tri]
         two = self.two_sided[tri]
         if np.any(two):
@@ -172,9 +180,9 @@ class LightTable:
     def emitted(self, tri: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(3, n) luminance leaving light triangles ``tri`` toward rays that arrive along ``d`` (3, n):
         the radiance on the emitting side, 0 behind a one-sided emitter."""
-        front = dot(d, np.take(self.tris.normal, tri, axis=1)) < 0
+        front = dot(d, np.take(self.normal32, tri, axis=1)) < 0
         visible = front | self.two_sided[tri]
-        return np.take(self.radiance, tri, axis=1) * visible
+        return np.take(self.radiance32, tri, axis=1) * visible
 
     def pdf_power_area(self, tri: np.ndarray) -> np.ndarray:
         """Area density (mm^-2) of the power-proportional choice of a point on light triangles ``tri``."""
@@ -190,14 +198,15 @@ class LightTable:
         k = self.clusters
         if k <= 1 or k > MAX_CLUSTERS:
             return None
-        out = np.empty((k, p.shape[1]))
+        out = np.empty((k, p.shape[1]), F32)
+        p32 = p.astype(F32)  # a heuristic: float32 relative to the shading points is plenty
         for i in range(k):
-            v = self.centre[:, i:i + 1] - p
+            v = self._centre32[:, i:i + 1] - p32
             d2 = dot(v, v)
-            w = v / np.sqrt(np.maximum(d2, 1e-300))
-            g = self.cluster_power[i] / np.maximum(d2, self.radius[i] ** 2)
-            if np.any(self.cluster_normal[:, i]):
-                g = g * np.maximum(-dot(w, self.cluster_normal[:, i:i + 1]), 0.0)
+            w = v * (1 / np.sqrt(np.maximum(d2, F32(1e-30))))
+            g = self._cpower32[i] / np.maximum(d2, self._r2_32[i])
+            if self._planar[i]:
+                g = g * np.maximum(-dot(w, self._cnormal32[:, i:i + 1]), 0)
             out[i] = density(w) * g
         return out
 
@@ -232,15 +241,15 @@ class LightTable:
 
     def connection(self, p: np.ndarray, tri: np.ndarray, y: np.ndarray):
         """Geometry of connections from shading points ``p`` to light points ``y`` (both (3, n)):
-        (unit directions p -> y (3, n), distances (n,) mm, luminance arriving at p (3, n),
-        |cos| at the light (n,))."""
+        (unit directions p -> y (3, n) float32, distances (n,) mm, luminance arriving at p (3, n) float32,
+        |cos| at the light (n,) float32)."""
         v = y - p
         dist = norm(v)
-        w = v / np.maximum(dist, 1e-300)
-        n_y = np.take(self.tris.normal, tri, axis=1)
+        w = (v * (1.0 / np.maximum(dist, 1e-300))).astype(F32)
+        n_y = np.take(self.normal32, tri, axis=1)
         cos_y = -dot(w, n_y)
         lit = (cos_y > 0) | self.two_sided[tri]
-        return w, dist, np.take(self.radiance, tri, axis=1) * lit, np.abs(cos_y)
+        return w, dist, np.take(self.radiance32, tri, axis=1) * lit, np.abs(cos_y)
 
     # -- the brightness-theorem analysis --------------------------------------------------------
     def quadrature(self, level: int = 4):

@@ -10,9 +10,12 @@ Conventions
   convert.
 - Densities of directions are per steradian (sr^-1), densities of points per unit area of the
   surface in the length unit of the inputs (mm^-2 in the tracer, see :mod:`.units`).
-- Angles of warps are evaluated in float32 (numpy's SIMD sin/cos: 0.6 ns against 9 ns in float64);
-  the warped points are float64 and the densities are computed from them, so sampler and pdf stay
-  consistent to float64 precision.
+- Warps compute in the precision of their random numbers ``u``: the tracer passes float32 (its
+  directions are float32, tracer.vec); float64 ``u`` give float64 results, with angles still
+  evaluated in float32 (numpy's SIMD sin/cos: 0.6 ns against 9 ns in float64) and the densities
+  computed from the warped points, so sampler and pdf stay consistent.
+- Discrete choices (:class:`Distribution1D`) always take float64 ``u``: a float32 number resolves
+  only 2^-24, and a choice among millions of HDRI pixels needs more.
 """
 
 from __future__ import annotations
@@ -45,9 +48,9 @@ def make_rng(seed: int, *stream: int) -> np.random.Generator:
 
 
 def _cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin of angles (radians) through float32 SIMD kernels, returned as float64."""
-    a = angle.astype(np.float32)
-    return np.cos(a).astype(np.float64), np.sin(a).astype(np.float64)
+    """cos and sin of angles (radians) through float32 SIMD kernels, in the angles' precision."""
+    a = angle.astype(np.float32, copy=False)
+    return np.cos(a).astype(angle.dtype, copy=False), np.sin(a).astype(angle.dtype, copy=False)
 
 
 def uniform_disk_concentric(u: np.ndarray) -> np.ndarray:
@@ -74,7 +77,8 @@ def uniform_disk_concentric(u: np.ndarray) -> np.ndarray:
     r = np.where(first, a, b)
     ratio_ab = np.divide(b, a, out=np.zeros_like(a), where=first)
     ratio_ba = np.divide(a, b, out=np.zeros_like(b), where=~first & (b != 0.0))
-    phi = np.where(first, 0.25 * np.pi * ratio_ab, 0.5 * np.pi - 0.25 * np.pi * ratio_ba)
+    quarter = a.dtype.type(0.25 * np.pi)
+    phi = np.where(first, quarter * ratio_ab, 2 * quarter - quarter * ratio_ba)
     c, s = _cos_sin(phi)
     return np.stack([r * c, r * s])
 
@@ -96,13 +100,13 @@ def cosine_hemisphere(u: np.ndarray) -> np.ndarray:
     M. Pharr, W. Jakob and G. Humphreys, "Physically Based Rendering", 3rd ed., section 13.6.3.
     """
     xy = uniform_disk_concentric(u)
-    z = np.sqrt(np.maximum(0.0, 1.0 - xy[0] * xy[0] - xy[1] * xy[1]))
+    z = np.sqrt(np.maximum(0, 1 - xy[0] * xy[0] - xy[1] * xy[1]))
     return np.concatenate([xy, z[None]])
 
 
 def cosine_hemisphere_pdf(d: np.ndarray) -> np.ndarray:
     """Density of :func:`cosine_hemisphere`: max(d_z, 0) / pi per steradian; ``d`` (3, n) local."""
-    return np.maximum(d[2], 0.0) / np.pi
+    return np.maximum(d[2], 0) * (1 / np.pi)
 
 
 def uniform_sphere(u: np.ndarray) -> np.ndarray:
@@ -111,8 +115,8 @@ def uniform_sphere(u: np.ndarray) -> np.ndarray:
     z = 1 - 2 u_0 is uniform in [-1, 1] (Archimedes' hat-box theorem) and the azimuth is 2 pi u_1
     (Pharr, Jakob and Humphreys, "Physically Based Rendering", 3rd ed., section 13.6.1).
     """
-    z = 1.0 - 2.0 * u[0]
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    z = 1 - 2 * u[0]
+    r = np.sqrt(np.maximum(0, 1 - z * z))
     c, s = _cos_sin(TWO_PI * u[1])
     return np.stack([r * c, r * s, z])
 
@@ -126,7 +130,7 @@ def uniform_triangle(u: np.ndarray) -> np.ndarray:
     doi:10.1145/571647.571648).
     """
     s = np.sqrt(u[0])
-    return np.stack([s * (1.0 - u[1]), s * u[1]])
+    return np.stack([s * (1 - u[1]), s * u[1]])
 
 
 def frame_from_normal(n: np.ndarray, tangent_hint: np.ndarray | None = None):
@@ -142,22 +146,22 @@ def frame_from_normal(n: np.ndarray, tangent_hint: np.ndarray | None = None):
     T. Duff, J. Burgess, P. Christensen, C. Hery, A. Kensler, M. Liani and R. Villemin,
     "Building an orthonormal basis, revisited", JCGT 6(1), 1-8 (2017), http://jcgt.org/published/0006/01/01/.
     """
-    n = n / norm(n)
+    n = n * (1 / norm(n))
     x, y, z = n[0], n[1], n[2]
-    sign = np.copysign(1.0, z)
-    a = -1.0 / (sign + z)
+    sign = np.copysign(n.dtype.type(1), z)
+    a = -1 / (sign + z)
     c = x * y * a
-    t = np.stack([1.0 + sign * x * x * a, sign * c, -sign * x])
+    t = np.stack([1 + sign * x * x * a, sign * c, -sign * x])
     b = np.stack([c, sign + y * y * a, -y])
     if tangent_hint is None:
         return t, b, n
-    hint = np.asarray(tangent_hint, dtype=np.float64)
+    hint = np.asarray(tangent_hint, dtype=n.dtype)
     if hint.ndim == 1:
         hint = hint[:, None]
     t_hint = hint - dot(hint, n) * n
     length = norm(t_hint)
     usable = length > 1e-6 * norm(hint)
-    t = np.where(usable, t_hint / np.where(usable, length, 1.0), t)
+    t = np.where(usable, t_hint / np.where(usable, length, 1), t)
     b = np.where(usable, cross(n, t), b)
     return t, b, n
 
@@ -200,17 +204,18 @@ def gaussian_lobe(u: np.ndarray, beta0: np.ndarray, sigma: np.ndarray) -> tuple[
     doi:10.1117/3.975276; G. E. P. Box and M. E. Muller, Ann. Math. Statist. 29(2), 610-611 (1958),
     doi:10.1214/aoms/1177706645.
     """
-    radius = np.sqrt(-2.0 * np.log(1.0 - u[0]))
+    radius = np.sqrt(-2 * np.log(1 - u[0]))
     c, s = _cos_sin(TWO_PI * u[1])
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = np.asarray(sigma, dtype=u.dtype)
     if sigma.ndim == 1:
         sigma = sigma[:, None]
     bx = beta0[0] + sigma[0] * (radius * c)
     by = beta0[1] + sigma[1] * (radius * s)
     beta_sq = bx * bx + by * by
-    valid = beta_sq < 1.0
-    z = np.sqrt(np.maximum(0.0, 1.0 - beta_sq))
-    d = np.stack([np.where(valid, bx, 0.0), np.where(valid, by, 0.0), np.where(valid, z, 1.0)])
+    valid = beta_sq < 1
+    z = np.sqrt(np.maximum(0, 1 - beta_sq))
+    zero = bx.dtype.type(0)
+    d = np.stack([np.where(valid, bx, zero), np.where(valid, by, zero), np.where(valid, z, zero + 1)])
     return d, valid
 
 
@@ -222,13 +227,13 @@ def gaussian_lobe_pdf(d: np.ndarray, beta0: np.ndarray, sigma: np.ndarray) -> np
     d beta_x d beta_y = d_z d omega. Its integral over the hemisphere is P(|beta| < 1) <= 1.
     ``d`` (3, n) local, ``beta0`` (2, n), ``sigma`` (2,) or (2, n).
     """
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = np.asarray(sigma, dtype=d.dtype)
     if sigma.ndim == 1:
         sigma = sigma[:, None]
-    zx = (d[0] - beta0[0]) / sigma[0]
-    zy = (d[1] - beta0[1]) / sigma[1]
-    g2 = np.exp(-0.5 * (zx * zx + zy * zy)) / (TWO_PI * sigma[0] * sigma[1])
-    return np.where(d[2] > 0.0, g2 * d[2], 0.0)
+    zx = (d[0] - beta0[0]) * (1 / sigma[0])
+    zy = (d[1] - beta0[1]) * (1 / sigma[1])
+    g2 = np.exp(-0.5 * (zx * zx + zy * zy)) * (1 / (TWO_PI * sigma[0] * sigma[1]))
+    return np.where(d[2] > 0, g2 * d[2], d.dtype.type(0))
 
 
 def sample_disk_aperture(origins: np.ndarray, center: np.ndarray, normal: np.ndarray, radius: float,
@@ -313,7 +318,8 @@ class Distribution1D:
         """(indices (n,), their probabilities (n,)) for uniform ``u`` (n,)."""
         # The first index with cdf > u * total: zero weights repeat their predecessor's cdf and are
         # skipped, and u < 1 gives u * total < total in floating point, so idx < k.
-        idx = np.searchsorted(self.cdf, u * self.total, side="right")
+        idx = np.searchsorted(self.cdf, np.asarray(u, dtype=np.float64) * self.total, side="right")
+        idx = np.minimum(idx, len(self.cdf) - 1)  # u rounded up to 1 (float32 u) stays in range
         return idx, self.pmf_table[idx]
 
     def pmf(self, idx: np.ndarray) -> np.ndarray:

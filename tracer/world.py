@@ -83,7 +83,7 @@ class World:
         (all of one ``material``, when given: its objects say whether normals or UVs need interpolating)."""
         a = self.accel
         if ng is None:
-            ng = np.take(a.normal, face, axis=1)
+            ng = np.take(a.normal32, face, axis=1)
         if material is not None and not any(o.normals is not None or o.uv is not None for o in material.objects):
             ns, uv = ng, None
         else:

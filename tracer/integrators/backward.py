@@ -37,7 +37,7 @@ from ..optics.bsdf import RADIANCE, REFLECTION, TRANSMISSION
 from ..sampling import uniform_disk_concentric
 from ..schema import Field
 from ..units import luminance3
-from ..vec import dot
+from ..vec import F32, dot
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
 
@@ -187,7 +187,7 @@ class BackwardTracer(Integrator, PathMethod):
         sy = (1 - 2 * ((pix // w) + jit[1]) / h) * eye.half_y
         lens, lens_weight = self.lens_samples(rng, n)
         o, d, geo = eye.generate_rays(sx, sy, lens)
-        beta = np.broadcast_to(geo * eye.pixel_area * lens_weight / eye.extent[pix], (3, n)).copy()
+        beta = np.broadcast_to((geo * (eye.pixel_area * lens_weight / eye.extent[pix])).astype(F32), (3, n)).copy()
         return PathState(o, d, beta, pix, rep, np.zeros(n), np.ones(n, bool),
                          {"sample": np.arange(first, first + n), "splits": np.zeros(n, np.int8)})
 
@@ -224,6 +224,8 @@ class BackwardTracer(Integrator, PathMethod):
 
     @staticmethod
     def _power_heuristic(p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
+        """p_a^2 / (p_a^2 + p_b^2), in float64 (squared densities of small sources exceed float32)."""
+        p_a, p_b = np.asarray(p_a, np.float64), np.asarray(p_b, np.float64)
         a2, b2 = p_a * p_a, p_b * p_b
         s = a2 + b2
         return np.where(s > 0, a2 / np.where(s > 0, s, 1.0), 0.0)
@@ -269,6 +271,7 @@ class BackwardTracer(Integrator, PathMethod):
                 parts.append(Shadow(o, d, tmax, np.take(value, ok, axis=1), data(ok)))
         if self.nee_env:
             w, radiance, p_env = self.env.sample(rng.random((2, m)))
+            w = w.astype(F32)
             f = bsdf.eval(it, w, RADIANCE)
             mis = self._power_heuristic(p_env, bsdf.pdf(it, w))
             value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))

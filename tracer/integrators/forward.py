@@ -19,6 +19,7 @@ import numpy as np
 from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..units import luminance3
+from ..vec import F32
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, continue_by_sampling, trace
 
@@ -69,8 +70,8 @@ class ForwardTracer(Integrator, PathMethod):
         lights = self.lights
         tri, points, normal, pdf_pos = lights.sample_emission(rng.random((4, n)))
         it = Interaction(-normal, points, normal, normal, None, lights.slot[tri])
-        s = self.emission.sample(it, rng.random((self.emission.dims, n)), IMPORTANCE)
-        beta = np.take(lights.radiance, tri, axis=1) * (np.pi * s.weight / pdf_pos)
+        s = self.emission.sample(it, rng.random((self.emission.dims, n), F32), IMPORTANCE)
+        beta = (np.take(lights.radiance, tri, axis=1) * (np.pi * s.weight / pdf_pos)).astype(F32)
         alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
         wo = np.take(s.wo, alive, axis=1)
         o = self.world.accel.spawn(np.take(points, alive, axis=1), np.take(normal, alive, axis=1), wo)

@@ -31,7 +31,7 @@ import numpy as np
 from ..accel import OFFSET_SCALE
 from ..optics.bsdf import DELTA
 from ..units import luminance3
-from ..vec import max3, norm
+from ..vec import F32, max3, norm
 
 
 class Timers:
@@ -74,10 +74,11 @@ class Timers:
 class PathState:
     """A batch of paths, structure of arrays.
 
-    o, d : (3, n) ray origins (mm) and unit directions of the next segment. beta : (3, n) RGB path
-    weight (the throughput: radiance weight on camera paths, flux on light paths). owner : (n,) int64
+    o, d : (3, n) ray origins (mm, float64) and unit directions (float32) of the next segment.
+    beta : (3, n) float32 RGB path weight (the throughput: radiance weight on camera paths, flux on
+    light paths). owner : (n,) int64
     pixel (camera paths) or particle index (light paths). rep : (n,) int64 replicate of the film.
-    pdf : (n,) solid-angle pdf with which the last direction was sampled (0 after a delta lobe).
+    pdf : (n,) float32 solid-angle pdf with which the last direction was sampled (0 after a delta lobe).
     specular : (n,) bool, the last vertex was a delta lobe (or the path start): what the path finds
     next is counted in full, without a multiple-importance weight. extra : method-specific (n,)
     arrays carried along (the analysis' chain codes).
@@ -116,8 +117,8 @@ class PathState:
     @staticmethod
     def empty(extra_keys=()) -> PathState:
         z = np.zeros(0, np.int64)
-        return PathState(np.zeros((3, 0)), np.zeros((3, 0)), np.zeros((3, 0)), z, z, np.zeros(0), np.zeros(0, bool),
-                         {k: z for k in extra_keys})
+        return PathState(np.zeros((3, 0)), np.zeros((3, 0), F32), np.zeros((3, 0), F32), z, z, np.zeros(0, F32),
+                         np.zeros(0, bool), {k: z for k in extra_keys})
 
 
 @dataclass
@@ -159,7 +160,7 @@ def segment_to(accel, p: np.ndarray, ng: np.ndarray, y: np.ndarray, offset: np.n
     v = y - o
     dist = norm(v)
     margin = 2.0 * OFFSET_SCALE * (1.0 + max3(np.abs(y - accel.center_col)))
-    return o, v / np.maximum(dist, 1e-300), np.maximum(dist - margin, 0.0)
+    return o, (v * (1.0 / np.maximum(dist, 1e-300))).astype(F32), np.maximum(dist - margin, 0.0)
 
 
 class Roulette:
@@ -276,14 +277,14 @@ class Next:
 
     @staticmethod
     def empty(m: int) -> Next:
-        return Next(np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty(m), np.empty(m, bool),
-                    np.zeros(m, bool))
+        return Next(np.empty((3, m)), np.empty((3, m), F32), np.empty((3, m), F32), np.empty(m, F32),
+                    np.empty(m, bool), np.zeros(m, bool))
 
 
 def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice) -> list[PathState]:
     """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path,
     written into ``nxt[sl]``; absorbed samples end. Returns no further paths."""
-    s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it))) if sampler.dims else None, mode)
+    s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it)), F32) if sampler.dims else None, mode)
     beta = state.beta * s.weight
     nxt.beta[:, sl] = beta
     nxt.d[:, sl] = s.wo
@@ -319,8 +320,8 @@ def _compact(method: PathMethod, st: PathState, nxt: Next, ctx, splits: list[Pat
         parts = [(nxt, keep)]
     k = len(keep)
     n = k + (len(parts[1][0]) if len(parts) > 1 else 0)
-    out = PathState(np.empty((3, n)), np.empty((3, n)), np.empty((3, n)), np.empty(n, np.int64),
-                    np.empty(n, np.int64), np.empty(n), np.empty(n, bool),
+    out = PathState(np.empty((3, n)), np.empty((3, n), F32), np.empty((3, n), F32), np.empty(n, np.int64),
+                    np.empty(n, np.int64), np.empty(n, F32), np.empty(n, bool),
                     {key: np.empty(n, v.dtype) for key, v in st.extra.items()})
     for name in ("o", "d", "beta"):
         np.take(getattr(nxt, name), keep, axis=1, out=getattr(out, name)[:, :k])
@@ -382,7 +383,7 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             f = face[order]
             th = t[order]
             p = st.o + th * st.d
-            ng = np.take(accel.normal, f, axis=1)
+            ng = np.take(accel.normal32, f, axis=1)
             if len(lights):
                 tri = lights.face_light[f]
                 e = np.flatnonzero(tri >= 0)

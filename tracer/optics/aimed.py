@@ -18,13 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..sampling import cosine_hemisphere, frame_from_normal, to_world
-from ..vec import dot
+from ..vec import F32, dot
 from .bsdf import REFLECTION, TRANSMISSION, BSDFSample, Interaction
 
 
 class CosineEmission:
     """Lambertian emission as a sampler: directions about ``it.ng`` (the emitting side's normal) with
-    density cos / pi; f |cos| = cos / pi, so an unaimed sample has weight 1."""
+    density cos / pi; f |cos| = cos / pi, so an unaimed sample has weight 1. Directions, weights and
+    densities in the precision of ``it.ng``."""
 
     dims = 2
     flags = REFLECTION
@@ -32,16 +33,15 @@ class CosineEmission:
     def sample(self, it: Interaction, u: np.ndarray, mode=None) -> BSDFSample:
         t, b, n = frame_from_normal(it.ng)
         wo = to_world(cosine_hemisphere(u), t, b, n)
-        pdf = np.maximum(dot(wo, it.ng), 0.0) / np.pi
+        pdf = np.maximum(dot(wo, it.ng), 0) * (1 / np.pi)
         ok = pdf > 0
-        return BSDFSample(wo, np.broadcast_to(ok * 1.0, (3, len(it))).copy(), pdf,
-                          np.where(ok, REFLECTION, 0).astype(np.int8))
+        return BSDFSample(wo, ok.astype(wo.dtype)[None], pdf, np.where(ok, REFLECTION, 0).astype(np.int8))
 
     def eval(self, it: Interaction, wo: np.ndarray, mode=None) -> np.ndarray:
-        return np.broadcast_to(np.maximum(dot(wo, it.ng), 0.0) / np.pi, (3, len(it)))
+        return np.broadcast_to(self.pdf(it, wo), (3, len(it)))
 
     def pdf(self, it: Interaction, wo: np.ndarray) -> np.ndarray:
-        return np.maximum(dot(wo, it.ng), 0.0) / np.pi
+        return np.maximum(dot(wo, it.ng), 0) * (1 / np.pi)
 
     def eval_pdf(self, it: Interaction, wo: np.ndarray, mode=None):
         pdf = self.pdf(it, wo)
@@ -63,9 +63,9 @@ class Aimed:
     def __init__(self, own, aims: dict, slots: int):
         self.own = own
         self.flags = own.flags
-        self.share = np.zeros(slots)
+        self.share = np.zeros(slots, F32)
         self.which = np.full(slots, -1, np.int64)
-        self.sign = np.ones(slots)
+        self.sign = np.ones(slots, F32)
         self.targets = []
         for slot, (target, share, mode) in aims.items():
             if target not in self.targets:
@@ -91,10 +91,10 @@ class Aimed:
         share, which, sign = self.share[it.slot], self.which[it.slot], self.sign[it.slot]
         aimed = u[0] < share
         own_idx, aim_idx = np.flatnonzero(~aimed), np.flatnonzero(aimed)
-        wo = np.empty((3, n))
-        f = np.zeros((3, n))
-        p_own = np.zeros(n)
-        p_t = np.zeros(n)
+        wo = np.empty((3, n), F32)
+        f = np.zeros((3, n), F32)
+        p_own = np.zeros(n, F32)
+        p_t = np.zeros(n, F32)
         own_flags = np.zeros(n, np.int8)
         if hasattr(self.own, "prepare"):
             self.own.prepare(it)  # frames once, for both subsets
@@ -120,10 +120,10 @@ class Aimed:
             f[:, aim_idx], p_own[aim_idx] = self.own.eval_pdf(sub, np.take(wo, aim_idx, axis=1), mode)
         mix = share * p_t + (1.0 - share) * p_own
         valid = np.where(aimed, p_t > 0, own_flags != 0) & (mix > 0)
-        weight = np.where(valid, f / np.where(valid, mix, 1.0), 0.0)
+        weight = np.where(valid, f / np.where(valid, mix, 1), 0)
         through = dot(wo, it.ng) * dot(it.d, it.ng) > 0
         flags = np.where(valid, np.where(aimed, np.where(through, TRANSMISSION, REFLECTION), own_flags), 0)
-        return BSDFSample(wo, weight, np.where(valid, mix, 0.0), flags.astype(np.int8))
+        return BSDFSample(wo, weight, np.where(valid, mix, 0), flags.astype(np.int8))
 
     def eval(self, it: Interaction, wo: np.ndarray, mode) -> np.ndarray:
         return self.own.eval(it, wo, mode)

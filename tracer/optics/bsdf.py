@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..vec import dot
+from ..vec import F32, dot
 
 #: Transport modes.
 RADIANCE, IMPORTANCE = "radiance", "importance"
@@ -39,9 +39,10 @@ DELTA, REFLECTION, TRANSMISSION = 1, 2, 4
 class Interaction:
     """Rays (n of them) that hit surfaces of one material; all vectors (3, n) planes, world mm.
 
-    d : unit propagation directions of the arriving rays. p : hit points. ng : unit geometric
-    normals (mesh winding). ns : unit shading normals (interpolated, on the side of ng).
-    uv : (2, n) texture coordinates or None. slot : (n,) the objects' slots in the world.
+    d : unit propagation directions of the arriving rays (float32). p : hit points (float64).
+    ng : unit geometric normals (mesh winding; float32). ns : unit shading normals (interpolated, on
+    the side of ng; float32). uv : (2, n) float32 texture coordinates or None. slot : (n,) the
+    objects' slots in the world.
     offset : (n,) the faces' spawn offsets (mm; tracer.accel), or None.
     cache : per-interaction values a material computes once (its local frames).
     """
@@ -61,7 +62,7 @@ class Interaction:
     def side(self) -> np.ndarray:
         """+1 where the ray arrives on the front (normal) side, -1 on the back side; (n,)."""
         if "side" not in self.cache:
-            self.cache["side"] = np.where(dot(self.d, self.ng) < 0, 1.0, -1.0)
+            self.cache["side"] = np.where(dot(self.d, self.ng) < 0, F32(1), F32(-1))
         return self.cache["side"]
 
     def take(self, idx: np.ndarray) -> Interaction:
@@ -119,10 +120,9 @@ class BSDF:
         """Every lobe is a delta distribution (nothing for next-event estimation to connect to)."""
         return bool(self.flags & DELTA) or self.flags == 0
 
-    def table(self, name: str, as_array=np.asarray) -> np.ndarray:
-        """A parameter of every object, stacked along the last axis: (k, objects) or (objects,)."""
-        return np.stack([np.asarray(as_array(o.material.params[name]), dtype=np.float64) for o in self.objects],
-                        axis=-1)
+    def table(self, name: str) -> np.ndarray:
+        """A parameter of every object, stacked along the last axis: (k, objects) or (objects,), float32."""
+        return np.stack([np.asarray(o.material.params[name], dtype=F32) for o in self.objects], axis=-1)
 
     def gather(self, values: np.ndarray, it: Interaction) -> np.ndarray:
         """Per-object values (..., objects) at the rays of ``it``: (..., 1), which broadcasts, when

@@ -18,7 +18,7 @@ def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
 
     Parameters
     ----------
-    cos_i : (n,) cosine of the angle of incidence, in [0, 1].
+    cos_i : (n,) cosine of the angle of incidence, in [0, 1] (the results keep its precision).
     eta : n_t / n_i, scalar or (n,).
 
     Returns
@@ -26,17 +26,18 @@ def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
     R : (n,) reflectance (1 under total internal reflection).
     cos_t : (n,) cosine of the refraction angle (0 under total internal reflection).
     """
-    cos_i = np.clip(cos_i, 0.0, 1.0)
-    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
-    tir = sin2_t >= 1.0
-    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
+    cos_i = np.clip(cos_i, 0, 1)
+    sin2_t = (1 - cos_i * cos_i) / (eta * eta)
+    tir = sin2_t >= 1
+    cos_t = np.sqrt(np.clip(1 - sin2_t, 0, 1))
     rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
     rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
     r = 0.5 * (rs * rs + rp * rp)
-    return np.where(tir, 1.0, r), np.where(tir, 0.0, cos_t)
+    return np.where(tir, 1, r), np.where(tir, 0, cos_t)
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: np.ndarray | float, cos_i: np.ndarray, cos_t: np.ndarray) -> np.ndarray:
     """Refracted direction (Snell), (3, n), of unit ``d`` through a surface whose unit normal ``n``
     faces the incident side (d . n = -cos_i); eta = n_t / n_i."""
-    return normalize(d / eta + (cos_i / eta - cos_t) * n)
+    inv = 1 / eta
+    return normalize(d * inv + (cos_i * inv - cos_t) * n)

@@ -16,10 +16,14 @@ import numpy as np
 
 from ..sampling import cosine_hemisphere, frame_from_normal, gaussian_lobe, gaussian_lobe_pdf, to_local, to_world
 from ..schema import REQUIRED, Field, Schema
-from ..units import luminance
-from ..vec import dot, reflect
+from ..units import luminance3
+from ..vec import F32, dot, reflect
 from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
 from .fresnel import fresnel_unpolarized, refract
+
+#: The smallest positive value the float32 densities and probabilities are clamped to (1e-300 does
+#: not exist in float32).
+TINY = F32(1e-30)
 
 #: The materials by scene.json type name.
 MATERIALS: dict[str, type[BSDF]] = {}
@@ -43,7 +47,7 @@ def _energy_check(params: dict, fail):
 
 
 def _absorbed(n: int) -> BSDFSample:
-    return BSDFSample(np.zeros((3, n)), np.zeros((3, n)), np.zeros(n), np.zeros(n, np.int8))
+    return BSDFSample(np.zeros((3, n), F32), np.zeros((1, n), F32), np.zeros(n, F32), np.zeros(n, np.int8))
 
 
 def mirror_directions(it: Interaction) -> np.ndarray:
@@ -92,7 +96,8 @@ class Mirror(BSDF):
 
     def sample(self, it, u, mode):
         n = len(it)
-        return BSDFSample(mirror_directions(it), self.gather(self.r, it), np.zeros(n), np.full(n, self.flags, np.int8))
+        return BSDFSample(mirror_directions(it), self.gather(self.r, it), np.zeros(n, F32),
+                          np.full(n, self.flags, np.int8))
 
     def lobes(self, it, mode):
         return [(mirror_directions(it), self.gather(self.r, it), self.flags, "reflect")]
@@ -155,14 +160,14 @@ class Dielectric(BSDF):
     def sample(self, it, u, mode):
         side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
         refl = u[0] < r
-        w = 1.0 if mode != RADIANCE else np.where(refl, 1.0, 1.0 / (eta * eta))
+        w = F32(1) if mode != RADIANCE else np.where(refl, F32(1), 1 / (eta * eta))
         flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
         d_r, d_t = self._branches(it)
-        return BSDFSample(np.where(refl, d_r, d_t), np.broadcast_to(w, (1, len(it))), np.zeros(len(it)), flags)
+        return BSDFSample(np.where(refl, d_r, d_t), np.broadcast_to(w, (1, len(it))), np.zeros(len(it), F32), flags)
 
     def lobes(self, it, mode):
         side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-        t = 1.0 - r if mode != RADIANCE else (1.0 - r) / (eta * eta)
+        t = 1 - r if mode != RADIANCE else (1 - r) / (eta * eta)
         d_r, d_t = self._branches(it)
         return [(d_r, r[None], DELTA | REFLECTION, "reflect"), (d_t, t[None], DELTA | TRANSMISSION, "refract")]
 
@@ -183,8 +188,8 @@ class Coating(BSDF):
     def __init__(self, objects):
         super().__init__(objects)
         self.r, self.t = self.table("reflectance"), self.table("transmittance")
-        yr, yt = luminance(self.r.T), luminance(self.t.T)
-        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1.0), 0.0)
+        yr, yt = luminance3(self.r), luminance3(self.t)
+        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1), 0).astype(F32)
 
     def sample(self, it, u, mode):
         n = len(it)
@@ -192,9 +197,9 @@ class Coating(BSDF):
         refl = u[0] < p
         out = np.where(refl, mirror_directions(it), it.d)
         r, t = self.gather(self.r, it), self.gather(self.t, it)
-        w = np.where(refl, r / np.maximum(p, 1e-300), t / np.maximum(1.0 - p, 1e-300))
+        w = np.where(refl, r / np.maximum(p, TINY), t / np.maximum(1 - p, TINY))
         flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
-        return BSDFSample(out, w, np.zeros(n), flags)
+        return BSDFSample(out, w, np.zeros(n, F32), flags)
 
     def lobes(self, it, mode):
         return [(mirror_directions(it), self.gather(self.r, it), DELTA | REFLECTION, "reflect"),
@@ -229,7 +234,8 @@ class LCD(BSDF):
             img, cr = p["image"], p["contrast_ratio"]
             h, w = img.shape[:2]
             rel = 1.0 / cr + (1.0 - 1.0 / cr) * img.reshape(h * w, 3).T
-            self.cells.append((h, w, np.ascontiguousarray(rel), p["transmittance"].reshape(3, 1)))
+            t_open = p["transmittance"].reshape(3, 1).astype(F32)
+            self.cells.append((h, w, np.ascontiguousarray(rel, dtype=F32), t_open))
 
     def _lookup(self, it: Interaction, absolute: bool) -> np.ndarray:
         """(3, n) cell values at the rays' texture coordinates (OBJ convention: v up), relative to a
@@ -242,14 +248,14 @@ class LCD(BSDF):
             sel = slice(None) if len(self.cells) == 1 else np.flatnonzero(self.local[it.slot] == i)
             uv = it.uv[:, sel]
             x = np.clip((uv[0] * w).astype(np.int64), 0, w - 1)  # uv >= 0: truncation is floor
-            y = np.clip(((1.0 - uv[1]) * h).astype(np.int64), 0, h - 1)
+            y = np.clip(((1 - uv[1]) * h).astype(np.int64), 0, h - 1)
             cell = np.take(rel, y * w + x, axis=1)
             if absolute:
                 cell = cell * t_open
             if len(self.cells) == 1:
                 out = cell
             else:
-                out = np.empty((3, len(it))) if out is None else out
+                out = np.empty((3, len(it)), F32) if out is None else out
                 out[:, sel] = cell
         it.cache[key] = out
         return out
@@ -264,7 +270,7 @@ class LCD(BSDF):
 
     def sample(self, it, u, mode):
         n = len(it)
-        return BSDFSample(it.d, self.transmittance(it), np.zeros(n), np.full(n, self.flags, np.int8))
+        return BSDFSample(it.d, self.transmittance(it), np.zeros(n, F32), np.full(n, self.flags, np.int8))
 
     def lobes(self, it, mode):
         return [(it.d, self.transmittance(it), self.flags, "transmit")]
@@ -287,35 +293,35 @@ class Lambertian(BSDF):
         self._setup()
 
     def _setup(self):
-        yr, yt = luminance(self.rho.T), luminance(self.tau.T)
-        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1.0), 1.0)
+        yr, yt = luminance3(self.rho), luminance3(self.tau)
+        self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1), 1).astype(F32)
 
     def sample(self, it, u, mode):
         p = self.gather(self.p_reflect, it)
         refl = u[0] < p
-        normal = it.ng * (it.side() * np.where(refl, 1.0, -1.0))
+        normal = it.ng * (it.side() * np.where(refl, F32(1), F32(-1)))
         t, b, nn = frame_from_normal(normal)
         wo = to_world(cosine_hemisphere(u[1:3]), t, b, nn)
         cos = dot(wo, nn)
-        pdf = np.where(refl, p, 1.0 - p) * np.maximum(cos, 0.0) / np.pi
-        w = np.where(refl, self.gather(self.rho, it) / np.maximum(p, 1e-300),
-                     self.gather(self.tau, it) / np.maximum(1.0 - p, 1e-300))
+        pdf = np.where(refl, p, 1 - p) * np.maximum(cos, 0) * (1 / np.pi)
+        w = np.where(refl, self.gather(self.rho, it) / np.maximum(p, TINY),
+                     self.gather(self.tau, it) / np.maximum(1 - p, TINY))
         ok = pdf > 0
         flags = np.where(ok, np.where(refl, REFLECTION, TRANSMISSION), 0).astype(np.int8)
-        return BSDFSample(wo, np.where(ok, w, 0.0), pdf, flags)
+        return BSDFSample(wo, np.where(ok, w, 0), pdf, flags)
 
     def _same_side(self, it, wo):
         return dot(wo, it.ng) * dot(it.d, it.ng) < 0  # leaves back toward the incident side
 
     def eval(self, it, wo, mode):
         same = self._same_side(it, wo)
-        cos = np.abs(dot(wo, it.ng)) / np.pi
+        cos = np.abs(dot(wo, it.ng)) * (1 / np.pi)
         return np.where(same, self.gather(self.rho, it), self.gather(self.tau, it)) * cos
 
     def pdf(self, it, wo):
         p = self.gather(self.p_reflect, it)
         same = self._same_side(it, wo)
-        return np.where(same, p, 1.0 - p) * np.abs(dot(wo, it.ng)) / np.pi
+        return np.where(same, p, 1 - p) * np.abs(dot(wo, it.ng)) * (1 / np.pi)
 
 
 @material
@@ -357,7 +363,7 @@ class GaussianDiffuser(BSDF):
         super().__init__(objects)
         self.tau = self.table("transmittance")
         self.sigma = np.sin(np.radians(self.table("sigma_deg")))  # (2, objects), direction cosines
-        self.axis = np.stack([o.local_x for o in objects], axis=-1)  # (3, objects)
+        self.axis = np.stack([o.local_x for o in objects], axis=-1).astype(F32)  # (3, objects)
 
     def _frame(self, it: Interaction):
         if "frame" not in it.cache:
@@ -374,9 +380,9 @@ class GaussianDiffuser(BSDF):
         t, b, n = self._frame(it)
         sigma = self.gather(self.sigma, it)
         local, valid = gaussian_lobe(u, self._beta0(it), sigma)
-        pdf = np.where(valid, gaussian_lobe_pdf(local, self._beta0(it), sigma), 0.0)
+        pdf = np.where(valid, gaussian_lobe_pdf(local, self._beta0(it), sigma), 0)
         flags = np.where(valid, TRANSMISSION, 0).astype(np.int8)
-        return BSDFSample(to_world(local, t, b, n), np.where(valid, self.gather(self.tau, it), 0.0), pdf, flags)
+        return BSDFSample(to_world(local, t, b, n), np.where(valid, self.gather(self.tau, it), 0), pdf, flags)
 
     def pdf(self, it, wo):
         t, b, n = self._frame(it)
