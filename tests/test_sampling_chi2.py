@@ -495,12 +495,20 @@ def test_triangle_areas_and_sample_triangles():
 
 def test_sample_discrete_pmf_and_errors():
     weights = np.array([2.0, 0.0, 6.0])
-    idx, pmf = smp.sample_discrete(weights, np.array([0.0, 0.2499, 0.25, 0.999999]))
+    dist = smp.Distribution1D(weights)
+    idx, pmf = dist.invert(np.array([0.0, 0.2499, 0.25, 0.999999]))
     np.testing.assert_array_equal(idx, [0, 0, 2, 2])
     np.testing.assert_allclose(pmf, [0.25, 0.25, 0.75, 0.75])
-    # The largest u below 1 does not reach trailing zero weights.
-    idx, _ = smp.sample_discrete(np.array([1.0, 1.0, 0.0]), np.array([np.nextafter(1.0, 0.0)]))
-    assert idx[0] == 1
+    # The largest u below 1 does not reach trailing zero weights, by either method.
+    tail = smp.Distribution1D(np.array([1.0, 1.0, 0.0]))
+    assert tail.invert(np.array([np.nextafter(1.0, 0.0)]))[0][0] == 1
+    assert tail.sample(np.array([np.nextafter(1.0, 0.0)]))[0][0] != 2
+    # The alias table never returns a weight of 0, and its frequencies are the pmf (exactly, on a grid).
+    u = (np.arange(60_000) + 0.5) / 60_000
+    idx, pmf = dist.sample(u)
+    assert not np.any(idx == 1)
+    np.testing.assert_allclose(np.bincount(idx, minlength=3) / len(u), [0.25, 0.0, 0.75], atol=1e-4)
+    np.testing.assert_allclose(pmf, dist.pmf(idx))
     for bad in ([0.0, 0.0], [1.0, -1.0], [1.0, np.nan], [1.0, np.inf], []):
         with pytest.raises(ValueError):
             smp.sample_discrete(np.array(bad), np.array([0.5]))

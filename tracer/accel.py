@@ -149,14 +149,19 @@ class Accelerator:
         if n == 0:
             return Hits(np.zeros(0, np.int64), np.zeros(0))
         o32, d32 = self._rays32(o, d)
-        res = self._scene.run(o32, d32, output=True)
-        face = res["primID"].astype(np.int64)
+        face = self._scene.run(o32, d32, output=False).astype(np.int64)  # primID, -1 for a miss
         ng = np.take(self.normal_ext, face, axis=1)  # face -1 (a miss) takes the zero column
         denom = dot(d, ng)
         ok = np.abs(denom) > 1e-9
         t = (np.take(self.plane, face) - (o[0] * ng[0] + o[1] * ng[1] + o[2] * ng[2])) / np.where(ok, denom, 1)
         if not ok.all():
-            t = np.where(ok, t, res["tfar"].astype(np.float64))
+            # Misses, and rays parallel to the plane they hit (t undefined there: the distance to the
+            # triangle's first corner along the ray).
+            graze = np.flatnonzero(~ok & (face >= 0))
+            if len(graze):
+                f = face[graze]
+                v = np.take(self.v0, f, axis=1) - np.take(o, graze, axis=1)
+                t[graze] = dot(v, np.take(d, graze, axis=1).astype(np.float64))
             t[face < 0] = np.inf
         return Hits(face, t)
 

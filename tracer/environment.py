@@ -372,7 +372,7 @@ class HdriEnvironment(Environment):
         uniform in solid angle inside it (azimuth and sin(latitude) uniform in the pixel's band)."""
         dist, omega = self._distribution()
         h, w = self._image.shape[:2]
-        idx, pmf = dist.sample(u[0])
+        idx, pmf = dist.invert(u[0])
         row, column = idx // w, idx % w
         # Reuse u[0]'s position inside the chosen pixel's cdf step for the azimuth (stratified).
         lo = np.where(idx > 0, dist.cdf[np.maximum(idx - 1, 0)], 0.0)

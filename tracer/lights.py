@@ -221,17 +221,17 @@ class LightTable:
         if importance is None:
             tri, pmf = self.dist.sample(u[0])
             return tri, self.tris.point(tri, u[1:3]), pmf / self.tris.area[tri]
-        share = self.cluster_power / self.cluster_power.sum()
+        share = (self.cluster_power / self.cluster_power.sum()).astype(F32)[:, None]
         total = importance.sum(axis=0)
-        q = DEFENSIVE * share[:, None] + (1.0 - DEFENSIVE) * importance / np.where(total > 0, total, 1.0)
-        q = np.where(total > 0, q, share[:, None])
+        q = DEFENSIVE * share + (1 - DEFENSIVE) * importance * (1 / np.where(total > 0, total, 1))
+        q = np.where(total > 0, q, share)
         cdf = np.cumsum(q, axis=0)
         x = u[0] * cdf[-1]
         k = np.minimum((cdf <= x).sum(axis=0), self.clusters - 1)
-        q_k = np.take_along_axis(q, k[None], axis=0)[0] / cdf[-1]
+        q_k = np.take_along_axis(q, k[None], axis=0)[0].astype(np.float64) / cdf[-1]
         lo = np.where(k > 0, np.take_along_axis(cdf, np.maximum(k - 1, 0)[None], axis=0)[0], 0.0)
         hi = np.take_along_axis(cdf, k[None], axis=0)[0]
-        v = np.clip((x - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0 - 1e-12)  # u[0] rescaled in the cluster
+        v = np.clip((x - lo) / np.maximum(hi - lo, 1e-30), 0.0, 1.0 - 1e-7)  # u[0] rescaled in the cluster
         a, b = self.cluster_range[k, 0], self.cluster_range[k, 1]
         c0 = np.where(a > 0, self.cdf[np.maximum(a - 1, 0)], 0.0)
         tri = np.searchsorted(self.cdf, c0 + v * (self.cdf[b - 1] - c0), side="right")

@@ -277,7 +277,7 @@ class Next:
 
     @staticmethod
     def empty(m: int) -> Next:
-        return Next(np.empty((3, m)), np.empty((3, m), F32), np.empty((3, m), F32), np.empty(m, F32),
+        return Next(np.empty((3, m)), np.empty((3, m), F32), np.zeros((3, m), F32), np.empty(m, F32),
                     np.empty(m, bool), np.zeros(m, bool))
 
 
@@ -302,14 +302,12 @@ def _compact(method: PathMethod, st: PathState, nxt: Next, ctx, splits: list[Pat
     beta = nxt.beta
     roulette = ctx.roulette if ctx.roulette is not None and ctx.roulette.threshold > 0 else None
     if roulette is not None:
-        live = np.flatnonzero(alive)
-        q = roulette.survival(method.potential(np.take(beta, live, axis=1)))
-        low = np.flatnonzero(q < 1.0)
-        if len(low):
-            idx = live[low]
-            keep = ctx.rng.random(len(low)) < q[low]
+        q = roulette.survival(method.potential(beta))  # the weights of paths that ended are 0
+        idx = np.flatnonzero(alive & (q < 1.0))
+        if len(idx):
+            keep = ctx.rng.random(len(idx)) < q[idx]
             alive[idx[~keep]] = False
-            beta[:, idx[keep]] *= 1.0 / np.maximum(q[low][keep], 1e-300)
+            beta[:, idx[keep]] *= 1.0 / np.maximum(q[idx[keep]], 1e-30)
     keep = np.flatnonzero(alive)
     if splits:
         extra = PathState.concat(splits)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..sampling import cosine_hemisphere, frame_from_normal, to_world
 from ..vec import F32, dot
-from .bsdf import REFLECTION, TRANSMISSION, BSDFSample, Interaction
+from .bsdf import DELTA, REFLECTION, BSDFSample, Interaction
 
 
 class CosineEmission:
@@ -121,8 +121,8 @@ class Aimed:
         mix = share * p_t + (1.0 - share) * p_own
         valid = np.where(aimed, p_t > 0, own_flags != 0) & (mix > 0)
         weight = np.where(valid, f / np.where(valid, mix, 1), 0)
-        through = dot(wo, it.ng) * dot(it.d, it.ng) > 0
-        flags = np.where(valid, np.where(aimed, np.where(through, TRANSMISSION, REFLECTION), own_flags), 0)
+        # An aimed sample's lobe: the own law's non-delta lobes (which side it leaves to is not needed).
+        flags = np.where(valid, np.where(aimed, np.int8(self.own.flags & ~DELTA), own_flags), np.int8(0))
         return BSDFSample(wo, weight, np.where(valid, mix, 0), flags.astype(np.int8))
 
     def eval(self, it: Interaction, wo: np.ndarray, mode) -> np.ndarray:
