@@ -116,8 +116,11 @@ class ChiefRays(PathMethod):
         self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out)
         return None
 
+    def spare(self, bsdf, hits):
+        return hits * 2 if bsdf.delta else 0
+
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
-        """Every delta branch, as further paths (``nxt`` is left dead: the analysis always splits)."""
+        """Every delta branch, as further paths (``nxt[sl]`` is left dead: the analysis always splits)."""
         if not bsdf.delta:
             return []
         names, which = self._by_object(it.slot)

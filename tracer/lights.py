@@ -161,6 +161,8 @@ class LightTable:
             a, b = self.cluster_range[i]
             f0 = first_face[o.slot]
             self.face_light[f0:f0 + (b - a)] = np.arange(a, b)
+        #: face_light with -1 appended (np.take with face -1, a miss, gives -1).
+        self.face_light_ext = np.append(self.face_light, -1)
 
     # -- emission (forward) ---------------------------------------------------------------------
     def sample_emission(self, u: np.ndarray):

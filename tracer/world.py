@@ -48,8 +48,11 @@ class World:
         self.lights = LightTable(traced)
         if self.accel is not None:
             self.face_material = slot_material[self.accel.face_slot]
-            #: face_material with -1 appended: np.take with face -1 (a miss) gives -1.
-            self.face_material_ext = np.append(self.face_material, np.int8(-1))
+            #: The shading group of every face: its material, or -1 where the material absorbs everything;
+            #: with -1 appended, so that np.take with face -1 (a miss) gives -1.
+            absorbing = np.array([m.flags == 0 for m in self.materials] + [True])
+            group = np.where(absorbing[self.face_material], -1, self.face_material).astype(np.int8)
+            self.face_group = np.append(group, np.int8(-1))
             self.lights.link_faces(self.accel.faces, self.accel.first_face)
         self._targets: dict[str, DiskTarget | MeshTarget] = {}
         #: Ray segments of a world without geometry (they all escape at once; counted as traced).

@@ -304,17 +304,26 @@ class BackwardTracer(Integrator, PathMethod):
         j = np.flatnonzero(both)
         if len(j) == 0:
             return out
-        nxt.alive[sl.start + j] = False  # these paths go on as their branches
-        extra = {kk: v[j] for kk, v in state.extra.items()}
-        extra["splits"] = extra["splits"] + 1
         p, ng, off = np.take(it.p, j, axis=1), np.take(it.ng, j, axis=1), it.offset[j]
         beta0 = np.take(state.beta, j, axis=1)
-        for wo, weight, _flags, _label in lobes:
+        rows = sl.start + j  # the first branch replaces the sampled continuation
+        nxt.extra["splits"][rows] += 1
+        more = nxt.reserve(len(j))  # the second goes after the bounce's hits
+        nxt.owner[more], nxt.rep[more] = nxt.owner[rows], nxt.rep[rows]
+        for v in nxt.extra.values():
+            v[more] = v[rows]
+        for (wo, weight, _flags, _label), at in zip(lobes, (rows, more), strict=True):
             w = np.take(wo, j, axis=1)
             beta = beta0 * np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
-            out.append(PathState(self.world.accel.spawn(p, ng, w, off), w, beta, state.owner[j], state.rep[j],
-                                 np.zeros(len(j)), np.ones(len(j), bool), dict(extra)))
+            nxt.o[:, at] = self.world.accel.spawn(p, ng, w, off)
+            nxt.d[:, at], nxt.beta[:, at] = w, beta
+            nxt.pdf[at], nxt.specular[at], nxt.alive[at] = 0, True, luminance3(beta) > 0
         return out
+
+    def spare(self, bsdf, hits):
+        """A glass surface or coating may split every path that hits it."""
+        two = bsdf.delta and bsdf.flags & REFLECTION and bsdf.flags & TRANSMISSION
+        return hits if self.splits > 0 and two else 0
 
     def potential(self, beta):
         """A camera sample carries at most its weight times the brightest source."""

@@ -237,8 +237,13 @@ class PathMethod:
 
     def continue_paths(self, state: PathState, it, bsdf, ctx, nxt: Next, sl: slice) -> list[PathState]:
         """The paths that leave the vertices of ``it``, before roulette: one per vertex written into
-        ``nxt[sl]`` (the default ends them all), and any further paths (splitting) returned."""
+        ``nxt[sl]`` (the default ends them all), further paths into entries reserved in ``nxt``, or
+        returned (they are appended)."""
         return []
+
+    def spare(self, bsdf, hits: int) -> int:
+        """How many further paths ``hits`` hits of ``bsdf`` may add in one bounce (splitting)."""
+        return 0
 
     def potential(self, beta: np.ndarray) -> np.ndarray:
         """The most luminance (cd/m^2) each path of weight ``beta`` (3, n) can still add to one pixel
@@ -266,7 +271,8 @@ class Context:
 class Next:
     """The continuation of one bounce's hits, in their sorted order: each material writes the slice of
     its hits (new origins, directions, weights, pdf, whether the lobe was delta, whether the path goes
-    on), and the loop compacts the survivors once (:func:`trace`)."""
+    on), a method that splits paths adds the extra branches after them (:meth:`reserve`), and the loop
+    compacts the survivors once (:func:`trace`). owner, rep and extra start as the hits' own."""
 
     o: np.ndarray
     d: np.ndarray
@@ -274,11 +280,42 @@ class Next:
     pdf: np.ndarray
     specular: np.ndarray
     alive: np.ndarray
+    owner: np.ndarray
+    rep: np.ndarray
+    extra: dict
+    used: int
 
     @staticmethod
-    def empty(m: int) -> Next:
-        return Next(np.empty((3, m)), np.empty((3, m), F32), np.zeros((3, m), F32), np.empty(m, F32),
-                    np.empty(m, bool), np.zeros(m, bool))
+    def for_hits(st: PathState, spare: int) -> Next:
+        """Room for the ``len(st)`` hits' continuations and ``spare`` extra branches."""
+        m = len(st)
+        n = m + spare
+
+        def like(a):
+            out = np.empty(n, a.dtype)
+            out[:m] = a
+            return out
+
+        return Next(np.empty((3, n)), np.empty((3, n), F32), np.zeros((3, n), F32), np.empty(n, F32),
+                    np.empty(n, bool), np.zeros(n, bool), like(st.owner), like(st.rep),
+                    {k: like(v) for k, v in st.extra.items()}, m)
+
+    def reserve(self, count: int) -> slice:
+        """Entries for ``count`` further paths (their owner, rep and extra are the caller's to fill)."""
+        if self.used + count > len(self.alive):
+            raise ValueError("more split branches than the bounce reserved room for")
+        sl = slice(self.used, self.used + count)
+        self.used += count
+        return sl
+
+    def append(self, state: PathState):
+        """Add whole paths (a method's further paths)."""
+        sl = self.reserve(len(state))
+        self.o[:, sl], self.d[:, sl], self.beta[:, sl] = state.o, state.d, state.beta
+        self.pdf[sl], self.specular[sl], self.alive[sl] = state.pdf, state.specular, True
+        self.owner[sl], self.rep[sl] = state.owner, state.rep
+        for k, v in state.extra.items():
+            self.extra[k][sl] = v
 
 
 def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice) -> list[PathState]:
@@ -295,11 +332,12 @@ def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl
     return []
 
 
-def _compact(method: PathMethod, st: PathState, nxt: Next, ctx, splits: list[PathState]) -> PathState:
-    """The paths that go on after a bounce: roulette on the living ones of ``nxt`` (sorted order) and
-    on the paths that splitting added (``splits``), then one compaction of both into the next state."""
-    alive = nxt.alive
-    beta = nxt.beta
+def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
+    """The paths that go on after a bounce: roulette on the living ones of ``nxt``, then one compaction
+    into the next state."""
+    n = nxt.used
+    alive = nxt.alive[:n]
+    beta = nxt.beta[:, :n]
     roulette = ctx.roulette if ctx.roulette is not None and ctx.roulette.threshold > 0 else None
     if roulette is not None:
         q = roulette.survival(method.potential(beta))  # the weights of paths that ended are 0
@@ -309,33 +347,9 @@ def _compact(method: PathMethod, st: PathState, nxt: Next, ctx, splits: list[Pat
             alive[idx[~keep]] = False
             beta[:, idx[keep]] *= 1.0 / np.maximum(q[idx[keep]], 1e-30)
     keep = np.flatnonzero(alive)
-    if splits:
-        extra = PathState.concat(splits)
-        if roulette is not None:
-            extra = roulette.apply(extra, method.potential(extra.beta), ctx.rng)
-        parts = [(nxt, keep), (extra, None)]
-    else:
-        parts = [(nxt, keep)]
-    k = len(keep)
-    n = k + (len(parts[1][0]) if len(parts) > 1 else 0)
-    out = PathState(np.empty((3, n)), np.empty((3, n), F32), np.empty((3, n), F32), np.empty(n, np.int64),
-                    np.empty(n, np.int64), np.empty(n, F32), np.empty(n, bool),
-                    {key: np.empty(n, v.dtype) for key, v in st.extra.items()})
-    for name in ("o", "d", "beta"):
-        np.take(getattr(nxt, name), keep, axis=1, out=getattr(out, name)[:, :k])
-    for name, src in (("pdf", nxt.pdf), ("specular", nxt.specular), ("owner", st.owner), ("rep", st.rep)):
-        np.take(src, keep, out=getattr(out, name)[:k])
-    for key, v in st.extra.items():
-        np.take(v, keep, out=out.extra[key][:k])
-    if len(parts) > 1:
-        e = parts[1][0]
-        for name in ("o", "d", "beta"):
-            getattr(out, name)[:, k:] = getattr(e, name)
-        for name in ("pdf", "specular", "owner", "rep"):
-            getattr(out, name)[k:] = getattr(e, name)
-        for key in st.extra:
-            out.extra[key][k:] = e.extra[key]
-    return out
+    t2 = lambda a: np.take(a, keep, axis=1)  # noqa: E731
+    return PathState(t2(nxt.o), t2(nxt.d), t2(nxt.beta), nxt.owner[keep], nxt.rep[keep], nxt.pdf[keep],
+                     nxt.specular[keep], {k: v[keep] for k, v in nxt.extra.items()})
 
 
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) -> int:
@@ -371,10 +385,17 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
                 miss = np.flatnonzero(face < 0)
             if len(miss):
                 method.escaped(state.take(miss), ctx)
-            mat = np.take(world.face_material_ext, face)  # -1 for misses and paths at the sensor
+            if len(lights):  # emission, before the emitters' own materials take the paths
+                tri = np.take(lights.face_light_ext, face)
+                e = np.flatnonzero(tri >= 0)
+                if len(e):
+                    se = state.take(e)
+                    method.emitted(se, tri[e], se.o + t[e] * se.d, t[e], ctx)
+            # Hits grouped by material; misses, paths at the sensor and absorbed paths (group -1) leave.
+            mat = np.take(world.face_group, face)
             order = np.argsort(mat, kind="stable")
             counts = np.bincount(mat.astype(np.int64) + 1, minlength=len(materials) + 1)
-            order = order[counts[0]:]  # the hits, grouped by material
+            order = order[counts[0]:]
             if len(order) == 0:
                 return 0
             st = state.take(order)
@@ -382,29 +403,25 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             th = t[order]
             p = st.o + th * st.d
             ng = np.take(accel.normal32, f, axis=1)
-            if len(lights):
-                tri = lights.face_light[f]
-                e = np.flatnonzero(tri >= 0)
-                if len(e):
-                    method.emitted(st.take(e), tri[e], np.take(p, e, axis=1), th[e], ctx)
-            nxt = Next.empty(len(order))
-            splits, shadows = [], []
+            bounds = np.cumsum(counts[1:])
+            spare = sum(method.spare(bsdf, int(counts[m + 1])) for m, bsdf in enumerate(materials))
+            nxt = Next.for_hits(st, spare)
+            shadows = []
             start = 0
             for m, bsdf in enumerate(materials):
-                end = start + int(counts[m + 1])
+                end = int(bounds[m])
                 if end == start:
                     continue
                 sl = slice(start, end)
                 start = end
-                if bsdf.flags == 0:
-                    continue  # absorbed
                 it = world.interaction(f[sl], p[:, sl], st.d[:, sl], ng[:, sl], bsdf)
                 sub = st.take(sl)
                 if not bsdf.delta:
                     sh = method.connect(sub, it, bsdf, ctx)
                     if sh is not None and len(sh):
                         shadows.append(sh)
-                splits += method.continue_paths(sub, it, bsdf, ctx, nxt, sl)
+                for extra in method.continue_paths(sub, it, bsdf, ctx, nxt, sl):
+                    nxt.append(extra)
         if shadows:
             sh = Shadow.concat(shadows)
             with timers("shadow"):
@@ -412,5 +429,5 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
             with timers("shade"):
                 method.deliver(sh, ~blocked, ctx)
         with timers("shade"):
-            state = _compact(method, st, nxt, ctx, splits)
+            state = _compact(method, nxt, ctx)
     return len(state)
