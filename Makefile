@@ -15,9 +15,9 @@ $(STAMP): requirements.lock pyproject.toml
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-# Render the default preset (forward method, 60 s) into out/ and print its report.
+# Render the default preset (backward method with next-event estimation, 60 s) into out/ and print its report.
 demo: $(STAMP)
-	$(VENV)/bin/hud-trace render hud-direct --method forward --seconds 60 --seed 1 --out out/hud-direct
+	$(VENV)/bin/hud-trace render hud-direct --method backward --seconds 60 --seed 1 --out out/hud-direct
 	cat out/hud-direct/report.json
 
 test: $(STAMP)

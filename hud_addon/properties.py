@@ -13,7 +13,7 @@ from bpy.props import (
     PointerProperty,
 )
 
-from ..tracer.integrators import INTEGRATORS
+from ..tracer.integrators import DEFAULT_METHOD, INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.schema import check_consistent
@@ -21,9 +21,9 @@ from .schema_ui import annotations
 
 
 def _method_items(self, context):
-    # Read from the tracer's registry: later methods appear here by themselves (forward first:
-    # the paper's method of choice for HUDs and the default).
-    names = sorted(INTEGRATORS, key=lambda n: (n != "forward", n))
+    # Read from the tracer's registry: later methods appear here by themselves (the tracer's default
+    # first, so that it is the property's default).
+    names = sorted(INTEGRATORS, key=lambda n: (n != DEFAULT_METHOD, n))
     return [(name, name.capitalize(), INTEGRATORS[name].summary) for name in names]
 
 

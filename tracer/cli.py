@@ -145,13 +145,14 @@ def cmd_methods(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .integrators import INTEGRATORS
+    from .integrators import DEFAULT_METHOD, INTEGRATORS
 
     ap = argparse.ArgumentParser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a preset or a scene folder")
     r.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
-    r.add_argument("--method", choices=sorted(INTEGRATORS), default="forward")
+    r.add_argument("--method", choices=sorted(INTEGRATORS), default=DEFAULT_METHOD,
+                   help=f"light-transport method (default {DEFAULT_METHOD})")
     b = r.add_mutually_exclusive_group(required=True)
     b.add_argument("--rays", type=int, help="budget in traced ray segments")
     b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")

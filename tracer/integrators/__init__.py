@@ -8,4 +8,9 @@ from ..film import Film
 from . import backward, forward  # noqa: F401  (registration)
 from .base import DEFAULT_BATCH, INTEGRATORS, Budget, Integrator, RenderResult
 
-__all__ = ["DEFAULT_BATCH", "INTEGRATORS", "Budget", "Film", "Integrator", "RenderResult"]
+#: The method used when none is named: backward tracing with next-event estimation, the most
+#: time-efficient on every preset (README, "Speed against accuracy"). The automatic choice of a method
+#: per scene (a later issue) replaces this constant.
+DEFAULT_METHOD = "backward"
+
+__all__ = ["DEFAULT_BATCH", "DEFAULT_METHOD", "INTEGRATORS", "Budget", "Film", "Integrator", "RenderResult"]
