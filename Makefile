@@ -36,8 +36,8 @@ extension: $(STAMP)
 	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
 	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip
 
-# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 17 minutes on 2 cores, and about 5 more
-# for Mitsuba: 4 presets x 2 integrators x 31 s of budgets, plus warm-ups).
+# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 30 minutes on 2 cores: references,
+# 4 presets x 3 method variants x 31 s of budgets, Mitsuba's 4 x 2 x 31 s, the throughput runs and the eyebox scan).
 # Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15
 # crash it), installed here when missing; without root or apt-get it runs the scalar variant and says so.
 LLVM19 = ls /usr/lib/*/libLLVM.so.19* 2>/dev/null | head -n 1

@@ -139,9 +139,11 @@ def main():
                   f"{np.median(startup):.1f} s, not in the rate")
             print(f"{label:16s} stages (share of one process's wall time): "
                   + ", ".join(f"{k} {v:.2f}" for k, v in share.items()))
+        # Only this process: a spawned worker's ru_maxrss starts from the parent's resident size at the
+        # fork that precedes its exec, so RUSAGE_CHILDREN would repeat this figure. A render's own peak:
+        # /usr/bin/time -v hud-trace render ... --workers 1 (README, "Speed").
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-        print(f"peak memory: {own:.0f} MiB (this process), {kids:.0f} MiB (largest worker)")
+        print(f"peak memory: {own:.0f} MiB (this process, holding every variant's world and the raw rays)")
 
 
 if __name__ == "__main__":

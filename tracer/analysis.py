@@ -35,7 +35,7 @@ from .vec import F32, dot, norm
 #: source's luminance: the roulette's reference is MIN_FACTOR / Roulette.EPSILON of it).
 MIN_FACTOR = 1e-5
 #: Point pairs (surface point, quadrature point) per shadow-ray call.
-CHUNK = 1 << 20
+CHUNK = 1 << 16
 
 
 class ChiefRays(PathMethod):
