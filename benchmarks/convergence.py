@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.throughput import VARIANTS, make  # noqa: E402
 from presets import PRESETS  # noqa: E402
+from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
@@ -250,6 +251,7 @@ def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -
 
 
 def main():
+    keep_freed_memory()  # as the command line does (tracer/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("--presets", nargs="*", default=list(PRESETS))
     ap.add_argument("--budgets", type=float, nargs="*", default=[1, 2, 4, 8, 16])

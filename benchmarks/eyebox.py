@@ -22,6 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
+from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.analysis import specular_paths  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import Y_WEIGHTS  # noqa: E402
@@ -50,6 +51,7 @@ def field_luminance(world: World, offset_right: float, offset_up: float, field_d
 
 
 def main():
+    keep_freed_memory()  # as the command line does (tracer/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--field", type=float, nargs=2, default=(6.0, 2.0), help="display field of view, deg")

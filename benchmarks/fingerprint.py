@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.throughput import VARIANTS, make  # noqa: E402
 from presets import PRESETS  # noqa: E402
+from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import luminance  # noqa: E402
@@ -46,6 +47,7 @@ def fingerprints(rays: int, seed: int) -> dict:
 
 
 def main():
+    keep_freed_memory()  # as the command line does (tracer/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("--rays", type=int, default=1_500_000)
     ap.add_argument("--seed", type=int, default=7)

@@ -32,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
 from tracer.accel import Accelerator  # noqa: E402
+from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
@@ -100,6 +101,7 @@ def own_rays_rate(integrator, batches: int = 8, repeats: int = 5) -> float:
 
 
 def main():
+    keep_freed_memory()  # as the command line does (tracer/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--seconds", type=float, default=20.0)

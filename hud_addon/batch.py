@@ -1,12 +1,13 @@
 """hud-render: render a saved .blend headless with the bpy module.
 
-    hud-render FILE.blend --out DIR [--method forward|backward] [--seconds S | --rays N] [--seed K]
+    hud-render FILE.blend --out DIR [--method backward|forward] [--seconds S | --rays N] [--seed K]
 
 The add-on is enabled from this source tree through a temporary local extension repository (Blender
 disables it at exit, so the bpy module does not hang), the file is opened, its HUD settings are
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
 DIR receives image.exr (multilayer: Combined and the luminance pass Y, cd/m^2) and report.json.
-This module imports nothing from the package at import time and runs as a top-level script.
+This module imports nothing from the package at import time (main() takes the tracer's allocator
+settings) and runs as a top-level script.
 
 With a real Blender and the extension installed:
     blender --background FILE.blend -E HUD_TRACER -o //render/image -F OPEN_EXR_MULTILAYER -f 1
@@ -44,6 +45,9 @@ def enable_from_source(bpy, tmp: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tracer.allocator import keep_freed_memory
+
+    keep_freed_memory()  # this process exists to render (see tracer/allocator.py)
     ap = argparse.ArgumentParser(prog="hud-render", description="Render a .blend with the HUD Tracer engine.")
     ap.add_argument("blend")
     ap.add_argument("--out", required=True)

@@ -76,9 +76,11 @@ def _resolve_scene(arg: str, tmp: Path) -> Path:
 
 
 def cmd_render(args) -> int:
+    from .allocator import keep_freed_memory
     from .integrators import Budget
     from .render import render_folder
 
+    keep_freed_memory()
     try:
         budget = Budget(rays=args.rays, seconds=args.seconds)
     except ValueError as e:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .allocator import keep_freed_memory
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
 from .scene import load_scene
@@ -33,6 +34,7 @@ _WORKER: dict = {}
 
 
 def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, ready):
+    keep_freed_memory()  # a worker process exists to trace
     integrator = INTEGRATORS[method](load_scene(scene_dir), seed, batch_size)
     integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
     _WORKER["integrator"] = integrator
