@@ -1,13 +1,22 @@
 """Command line: ``hud-trace render | presets | export | methods``.
 
-Exit status: 0 success; 2 bad input (the message names the file and the field; nothing is
-written); 3 the method found no light path (the outputs are written and say so); 130 interrupted
-with Ctrl-C (what was accumulated is written, marked ``"partial": true``).
+Exit status of ``render`` (each states what is on disk afterwards):
+
+- 0: success; image.exr, preview.png and report.json written as one set.
+- 2: bad input (one line naming the file or argument and the field); nothing traced, nothing written,
+  the output folder keeps what it held.
+- 3: the method found no light path (or the scene has no light); the outputs are written and say so.
+- 4: the outputs could not be written (a full disk, a folder that changed under the render); the
+  output folder keeps its earlier outputs.
+- 5: aborted by a second interrupt; nothing written, the output folder keeps its earlier outputs.
+- 130: interrupted (Ctrl-C, SIGTERM or SIGHUP): the batches merged so far are written as a set,
+  marked ``"partial": true``.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import signal
@@ -16,9 +25,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from .errors import SceneError
+from .errors import EstimateOverflowError, SceneError
 
-EXIT_INPUT, EXIT_NO_LIGHT, EXIT_INTERRUPTED = 2, 3, 130
+EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
+#: Signals that stop a render the way Ctrl-C does (batch schedulers send SIGTERM, a closed terminal SIGHUP).
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+#: Limits of the render arguments (beyond them a render cannot be meant).
+MAX_SECONDS = 1e7
+MAX_RAYS = 10**15
+MAX_WORKERS = 1024
 
 
 class ProgressBar:
@@ -45,7 +60,8 @@ class ProgressBar:
 
 
 class StopFlag:
-    """First Ctrl-C asks the render to stop after the current batch; a second one aborts."""
+    """The first stop signal asks the render to stop after the batches being merged and to write a
+    partial result; a second one aborts (KeyboardInterrupt: nothing is written)."""
 
     def __init__(self):
         self.stop = False
@@ -57,8 +73,31 @@ class StopFlag:
         if self.stop:
             raise KeyboardInterrupt
         self.stop = True
-        sys.stderr.write("\ninterrupt: finishing the current batch and writing a partial result "
-                         "(Ctrl-C again to abort)\n")
+        name = signal.Signals(signum).name
+        sys.stderr.write(f"\n{name}: stopping and writing a partial result (Ctrl-C again to abort)\n")
+
+
+class ArgumentError(Exception):
+    """A command-line argument out of its range (the message names the argument)."""
+
+
+def check_render_args(args):
+    """Every render argument in its range, before anything is loaded or traced."""
+    from .integrators.base import MAX_BATCH
+
+    def bad(flag, msg):
+        raise ArgumentError(f"{flag}: {msg}")
+
+    if args.rays is not None and not 1 <= args.rays <= MAX_RAYS:
+        bad("--rays", f"must lie in [1, {MAX_RAYS:.0e}], got {args.rays}")
+    if args.seconds is not None and not (math.isfinite(args.seconds) and 0 < args.seconds <= MAX_SECONDS):
+        bad("--seconds", f"must be a finite number in (0, {MAX_SECONDS:.0e}], got {args.seconds}")
+    if not 0 <= args.seed < 2**63:
+        bad("--seed", f"must lie in [0, 2^63), got {args.seed}")
+    if args.batch_size is not None and not 1 <= args.batch_size <= MAX_BATCH:
+        bad("--batch-size", f"must lie in [1, {MAX_BATCH}], got {args.batch_size}")
+    if not 1 <= args.workers <= MAX_WORKERS:
+        bad("--workers", f"must lie in [1, {MAX_WORKERS}], got {args.workers}")
 
 
 def _resolve_scene(arg: str, tmp: Path) -> Path:
@@ -78,25 +117,40 @@ def _resolve_scene(arg: str, tmp: Path) -> Path:
 def cmd_render(args) -> int:
     from .allocator import keep_freed_memory
     from .integrators import Budget
-    from .render import render_folder
+    from .outputs import OutputFolderError, OutputWriteError
+    from .render import render_scene
+    from .scene import load_scene
 
-    keep_freed_memory()
     try:
-        budget = Budget(rays=args.rays, seconds=args.seconds)
-    except ValueError as e:
-        print(f"error: --rays/--seconds: {e}", file=sys.stderr)
+        check_render_args(args)
+    except ArgumentError as e:
+        print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
+    keep_freed_memory()
+    budget = Budget(rays=args.rays, seconds=args.seconds)
     flag = StopFlag()
-    previous = signal.signal(signal.SIGINT, flag.handler)
+    previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
     bar = None if args.quiet else ProgressBar()
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
-            scene_dir = _resolve_scene(args.scene, Path(tmp))
-            report, result = render_folder(scene_dir, args.method, budget, args.seed, args.out,
-                                           progress=bar, should_stop=flag, batch_size=args.batch_size,
-                                           workers=args.workers)
+            scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
+            report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
+                                          should_stop=flag, batch_size=args.batch_size, workers=args.workers)
+    except (OutputFolderError, EstimateOverflowError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except OutputWriteError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_WRITE
+    except KeyboardInterrupt:
+        print(f"aborted: nothing written; {args.out} keeps what it held", file=sys.stderr)
+        return EXIT_ABORTED
+    except OSError as e:  # I/O outside the output set (a preset's temporary scene folder on a full disk)
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_WRITE
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         if bar:
             bar.close()
     lum = report["luminance"]
@@ -164,6 +218,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="processes (default: one per core); with --rays the image does not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--allow-external-files", action="store_true",
+                   help="let the scene name meshes and images outside its folder (absolute paths, \"..\", links "
+                        "out of it); the folder is then no longer self-contained")
     r.set_defaults(func=cmd_render)
     p = sub.add_parser("presets", help="list the presets")
     p.set_defaults(func=cmd_presets)

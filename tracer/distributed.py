@@ -77,6 +77,7 @@ class DaskExecutor:
 def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
                 should_stop=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
+    local.fit_batch(budget)  # before the batch size travels to the workers
     blob = pack_scene(local.scene.root)
     digest = hashlib.sha256(blob).hexdigest()
     [blob_future] = client.scatter([blob], broadcast=True)

@@ -41,3 +41,8 @@ class ImageReadError(TracerError):
         self.reason = reason
         super().__init__(f"{self.path}: {reason}")
 
+
+
+class EstimateOverflowError(TracerError):
+    """A value of the estimate does not fit the outputs (float32 images, JSON): a scene whose
+    luminances or fluxes are beyond what the tracer can represent."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue
+import signal
 import time
 from pathlib import Path
 
@@ -34,6 +35,12 @@ _WORKER: dict = {}
 
 
 def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, ready):
+    # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP reaches the whole process group,
+    # and a worker must not die of it mid-batch with a traceback. SIGTERM keeps its default (a quiet
+    # exit): the pool ends its workers with it.
+    for name in ("SIGINT", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
     keep_freed_memory()  # a worker process exists to trace
     integrator = INTEGRATORS[method](load_scene(scene_dir), seed, batch_size)
     integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
@@ -77,6 +84,7 @@ class PoolExecutor:
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
     folder, method, seed and batch size; see the module docstring)."""
+    local.fit_batch(budget)  # before the workers take the batch size
     ctx = mp.get_context("spawn")
     ready = ctx.Queue()
     init = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size, ready)

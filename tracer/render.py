@@ -1,6 +1,7 @@
 """One render, start to finish: scene folder -> integrator -> image.exr, preview.png, report.json.
 
-Output folder (written only after the render succeeded; files land atomically):
+Output folder (checked and locked before the first ray; the three files are written after the render
+as one set, each read back before it replaces its older version: tracer.outputs):
 
 - image.exr: float32 channels R, G, B (apparent luminance, linear Rec.709, Y in cd/m^2), Y, and Y_var
   (variance of each pixel's Y estimate, (cd/m^2)^2); header metadata hud:method, hud:rays, ...
@@ -12,15 +13,17 @@ from __future__ import annotations
 
 import json
 import math
-import os
+import uuid
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
 from .analysis import specular_paths
-from .imageio import write_exr, write_png
+from .errors import EstimateOverflowError
+from .imageio import read_exr_channels, read_image, write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
+from .outputs import OutputFile, OutputSet
 from .parallel import render_parallel
 from .scene import Scene, load_scene
 from .tonemap import log_average_luminance, tonemap_ward
@@ -175,8 +178,8 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
     warnings = list(result.warnings)
     if median_err is not None and median_err > NOISY:
         warnings.append(f"the image is dominated by noise: the median relative standard error of lit pixels is "
-                        f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time, "
-                        "or use a method that suits the scene (forward for small sources behind optics)")
+                        f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time"
+                        f"{INTEGRATORS[result.method].noise_advice if result.method in INTEGRATORS else ''}")
     return {
         "tracer": f"hud-tracer {__version__}",
         "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
@@ -212,40 +215,109 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
     }
 
 
+#: The files of a render, written as a set (tracer.outputs).
+OUTPUT_NAMES = ("image.exr", "preview.png", "report.json")
+
+
+def finite_json(value, where: str = "report") -> str:
+    """``value`` as JSON text; a NaN or infinite number (which JSON cannot hold) raises
+    :class:`EstimateOverflowError` naming its key path."""
+    def walk(v, path):
+        if isinstance(v, float) and not math.isfinite(v):
+            raise EstimateOverflowError(f"{where}: {path} is {v}: a value overflowed; the scene's luminances or "
+                                        "fluxes are beyond what the outputs can hold")
+        if isinstance(v, dict):
+            for k, x in v.items():
+                walk(x, f"{path}.{k}")
+        elif isinstance(v, (list, tuple)):
+            for i, x in enumerate(v):
+                walk(x, f"{path}[{i}]")
+
+    walk(value, "")
+    return json.dumps(value, indent=2, allow_nan=False) + "\n"
+
+
+def _finite_channels(channels: dict[str, np.ndarray]):
+    """Raise :class:`EstimateOverflowError` if a channel, as float32, holds NaN or Inf."""
+    for name, c in channels.items():
+        c32 = np.asarray(c, dtype=np.float32)
+        if not np.all(np.isfinite(c32)):
+            biggest = float(np.nanmax(np.abs(np.asarray(c, dtype=np.float64))))
+            raise EstimateOverflowError(f"image.exr: channel {name} does not fit in float32 (largest |value| "
+                                        f"{biggest:.3g}): the scene's luminances or fluxes are too large")
+
+
+def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarray, report: dict) -> list[OutputFile]:
+    """The render's three files, each with its read-back check."""
+    _finite_channels(channels)
+    report_text = finite_json(report)
+    planes = {k: np.asarray(v, dtype=np.float32) for k, v in channels.items()}
+
+    def check_exr(path):
+        got, got_attrs = read_exr_channels(path)
+        if set(got) != set(planes) or any(not np.array_equal(got[k], planes[k]) for k in planes):
+            raise ValueError("the pixels read back differ from those written")
+        if got_attrs.get("hud:run_id") != attrs["hud:run_id"]:
+            raise ValueError("the header read back differs from the one written")
+
+    def check_png(path):
+        if read_image(path).shape[:2] != preview.shape[:2]:
+            raise ValueError("the preview read back has another size")
+
+    def check_report(path):
+        if json.loads(Path(path).read_text())["run_id"] != report["run_id"]:
+            raise ValueError("the report read back differs from the one written")
+
+    return [OutputFile("image.exr", lambda p: write_exr(p, channels, attrs), check_exr),
+            OutputFile("preview.png", lambda p: write_png(p, preview), check_png),
+            OutputFile("report.json", lambda p: Path(p).write_text(report_text), check_report)]
+
+
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
                  progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
                  workers: int = 1):
     """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
-    (report dict, RenderResult)."""
+    (report dict, RenderResult).
+
+    The output folder is checked and locked before the first ray (:class:`tracer.outputs.OutputSet`:
+    :class:`~tracer.outputs.OutputFolderError` if it cannot take the outputs), and image.exr,
+    preview.png and report.json are written as a set after the render
+    (:class:`~tracer.outputs.OutputWriteError` if that fails; the earlier outputs are then kept). They
+    share a run id (``report["run_id"]``, the EXR attribute ``hud:run_id``). A partial render (stopped
+    through ``should_stop``) skips the brightness-theorem analysis, so that it ends promptly."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
-    kwargs = {"batch_size": batch_size} if batch_size else {}
-    world = World(scene)
-    integrator = INTEGRATORS[method](world, seed, **kwargs)
-    if workers > 1:
-        result = render_parallel(integrator, budget, workers, progress, should_stop)
-    else:
-        result = integrator.render(budget, progress, should_stop)
-    image = result.film.rgb()
-    var_y = result.film.variance_y()
-    if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
-        raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
-    y = luminance(image)
-    preview, info = tonemap_ward(image, adaptation_luminance(y))
-    analysis = brightness_theorem(world, y, var_y) if analyse and world.accel is not None else None
-    report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
-             "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency), "hud:seed": str(seed),
-             "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
-             "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); Y_var: (cd/m^2)^2"}
-    write_exr(out / "image.exr", {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y},
-              attrs)
-    write_png(out / "preview.png", preview)
-    tmp = out / f".report.json.{os.getpid()}"
-    tmp.write_text(json.dumps(report, indent=2) + "\n")
-    os.replace(tmp, out / "report.json")
+    outputs = OutputSet(out_dir, OUTPUT_NAMES).open()
+    try:
+        world = World(scene)
+        integrator = INTEGRATORS[method](world, seed, batch_size)
+        if workers > 1:
+            result = render_parallel(integrator, budget, workers, progress, should_stop)
+        else:
+            result = integrator.render(budget, progress, should_stop)
+        image = result.film.rgb()
+        var_y = result.film.variance_y()
+        if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
+            raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
+        y = luminance(image)
+        preview, info = tonemap_ward(image, adaptation_luminance(y))
+        analysis = None
+        if analyse and world.accel is not None and not result.partial:
+            analysis = brightness_theorem(world, y, var_y)
+        report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
+        run_id = uuid.uuid4().hex
+        report = {"run_id": run_id} | report
+        attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
+                 "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency),
+                 "hud:seed": str(seed), "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
+                 "hud:run_id": run_id,
+                 "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
+                              "Y_var: (cd/m^2)^2"}
+        channels = {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y}
+        outputs.commit(output_files(channels, attrs, preview, report))
+        outputs.keep()
+    finally:
+        outputs.close()
     return report, result
 
 

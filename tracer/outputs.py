@@ -1,0 +1,216 @@
+"""Output sets: the files of a render are written together, or not at all.
+
+A render writes image.exr, preview.png and report.json into one folder. :class:`OutputSet` makes them
+a set:
+
+- :meth:`OutputSet.open`, before the first ray: the folder is checked (a folder, or one that can be
+  made under folders; writable; its image.exr, preview.png and report.json, where they exist, are
+  files) and locked, so that a second render into the same folder is refused instead of mixing its
+  files with this one's. A folder that cannot take the outputs raises :class:`OutputFolderError`
+  before any work is done.
+- :meth:`OutputSet.commit`, after the render: every file is written into a hidden staging folder
+  inside the target, read back and checked by its own check (the EXR's pixels equal to what was
+  meant, the JSON parses), and only then moved into place, one rename each; should a rename fail,
+  the files already moved are put back. Any failure leaves the older set as it was and raises
+  :class:`OutputWriteError` (a full disk, for instance, which OpenEXR does not always report: the
+  read-back finds the short file).
+- :meth:`OutputSet.close` releases the lock and removes a folder that :meth:`open` created and that
+  is still empty (a render that failed or was aborted leaves nothing behind).
+
+The lock is ``flock`` on the folder itself (POSIX); where it does not exist (Windows) there is no
+lock, and the staging still keeps every set whole.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import TracerError
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
+#: Prefix of the staging folders inside a target folder (left over only by a killed process; removed
+#: by the next render that holds the lock).
+STAGING_PREFIX = ".hud-staging-"
+
+
+class OutputError(TracerError):
+    """An output folder or file problem; ``path`` is the folder or file at fault."""
+
+    def __init__(self, path, message: str):
+        self.path = str(path)
+        self.message = message
+        super().__init__(f"{self.path}: {message}")
+
+
+class OutputFolderError(OutputError):
+    """The output folder cannot take a render's outputs (found before the render starts)."""
+
+
+class OutputWriteError(OutputError):
+    """Writing the outputs failed; the folder keeps its earlier outputs."""
+
+
+@dataclass
+class OutputFile:
+    """One file of a set: ``write(path)`` writes it, ``check(path)`` reads it back and raises (any
+    exception) if it is not what was meant."""
+
+    name: str
+    write: Callable[[Path], None]
+    check: Callable[[Path], None]
+
+
+class OutputSet:
+    """The output folder of one render (see the module docstring)."""
+
+    def __init__(self, folder, names: tuple[str, ...]):
+        self.folder = Path(folder)
+        self.names = tuple(names)
+        self._fd: int | None = None
+        self._created: list[Path] = []
+
+    # -- before the render -----------------------------------------------------------------------
+    def open(self) -> OutputSet:
+        """Check and lock the folder (creating it, and missing parents, if needed)."""
+        folder = self.folder
+        if folder.exists() and not folder.is_dir():
+            raise OutputFolderError(folder, "exists and is not a folder")
+        missing = []
+        p = folder
+        while not p.exists():
+            missing.append(p)
+            if p.parent == p:
+                break
+            p = p.parent
+        if p.exists() and not p.is_dir():
+            raise OutputFolderError(folder, f"cannot be made: {p} is not a folder")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise OutputFolderError(folder, f"cannot be made ({e.strerror or e})") from None
+        self._created = list(reversed(missing))  # outermost first
+        try:
+            self._lock()
+            self._remove_stale_staging()
+            for name in self.names:
+                target = folder / name
+                if target.exists() and (target.is_dir() or not target.is_file()):
+                    raise OutputFolderError(target, "exists and is not a file; the render would write a file there")
+            probe = folder / f"{STAGING_PREFIX}probe-{uuid.uuid4().hex}"
+            try:
+                probe.mkdir()
+                (probe / "w").write_bytes(b"0")
+            except OSError as e:
+                raise OutputFolderError(folder, f"is not writable ({e.strerror or e})") from None
+            finally:
+                shutil.rmtree(probe, ignore_errors=True)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _lock(self):
+        if fcntl is None:
+            return
+        try:
+            self._fd = os.open(self.folder, os.O_RDONLY)
+        except OSError as e:
+            raise OutputFolderError(self.folder, f"cannot be opened ({e.strerror or e})") from None
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            self._fd = None
+            raise OutputFolderError(self.folder, "another render is writing into this folder; choose another "
+                                                 "--out or wait for it to finish") from None
+
+    def _remove_stale_staging(self):
+        for p in self.folder.glob(f"{STAGING_PREFIX}*"):
+            shutil.rmtree(p, ignore_errors=True)
+
+    # -- after the render ------------------------------------------------------------------------
+    def commit(self, files: list[OutputFile]):
+        """Write, check and move ``files`` into the folder as one set (see the module docstring)."""
+        if sorted(f.name for f in files) != sorted(self.names):
+            raise ValueError(f"an output set is {self.names}, got {[f.name for f in files]}")
+        staging = self.folder / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
+        try:
+            try:
+                staging.mkdir()
+                for f in files:
+                    f.write(staging / f.name)
+            except OSError as e:
+                raise OutputWriteError(self.folder, f"writing the outputs failed ({e}); the earlier outputs are "
+                                                    "kept") from None
+            for f in files:
+                try:
+                    f.check(staging / f.name)
+                except Exception as e:  # noqa: BLE001 - any failure of the read-back means a bad file
+                    raise OutputWriteError(self.folder / f.name, f"the written file does not read back ({e}); "
+                                           "the disk may be full; the earlier outputs are kept") from None
+            self._swap(staging, [f.name for f in files])
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+    def _swap(self, staging: Path, names: list[str]):
+        """Move the staged files onto the targets; on failure put back what was there."""
+        backups: dict[str, Path | None] = {}
+        try:
+            for name in names:
+                target = self.folder / name
+                backup = None
+                if target.exists():
+                    backup = staging / f".old-{name}"
+                    try:
+                        os.link(target, backup)  # the old file stays where it is until the replace
+                    except OSError:
+                        shutil.copy2(target, backup)
+                backups[name] = backup
+                os.replace(staging / name, target)
+        except OSError as e:
+            for name, backup in backups.items():
+                target = self.folder / name
+                try:
+                    if backup is not None:
+                        os.replace(backup, target)
+                    else:
+                        target.unlink(missing_ok=True)
+                except OSError:
+                    pass
+            raise OutputWriteError(self.folder, f"moving the outputs into place failed ({e}); the earlier outputs "
+                                                "are kept") from None
+
+    # -- always ----------------------------------------------------------------------------------
+    def close(self):
+        """Release the lock; remove the folders :meth:`open` made if they hold nothing."""
+        if self._fd is not None:
+            try:
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+            finally:
+                os.close(self._fd)
+                self._fd = None
+        for p in reversed(self._created):  # innermost first
+            try:
+                p.rmdir()
+            except OSError:
+                break
+        self._created = []
+
+    def keep(self):
+        """The render wrote its set: the folders made by :meth:`open` stay."""
+        self._created = []
+
+    def __enter__(self) -> OutputSet:
+        return self.open()
+
+    def __exit__(self, *exc):
+        self.close()
