@@ -37,7 +37,7 @@ import numpy as np
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
 from .units import luminance, normalize_color
-from .validate import FieldChecker
+from .validate import MAX_ABS, MAX_LUMINANCE, FieldChecker
 
 #: Calibration modes of :class:`HdriEnvironment`.
 CALIBRATION_MODES = ("scale", "mean", "max")
@@ -421,7 +421,8 @@ _FIELDS = {
 _REQUIRED = {"none": set(), "uniform": {"luminance"}, "hdri": {"file", "calibration"}}
 
 
-def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json") -> Environment:
+def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
+                          allow_external: bool = False) -> Environment:
     """Build the environment described by the "environment" block of scene.json.
 
     Accepted blocks (no other fields)::
@@ -459,7 +460,7 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json")
         an image that is missing, unreadable, with more than 4 channels, with negative or
         non-finite pixels, or black with calibration "mean" or "max".
     """
-    ck = FieldChecker(file)
+    ck = FieldChecker(file, allow_external)
     ck.obj(spec, "environment")
     if "type" not in spec:
         ck.fail("environment.type", "missing required field")
@@ -472,7 +473,7 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json")
         return NoEnvironment()
 
     if kind == "uniform":
-        L = ck.number(spec["luminance"], "environment.luminance", min_value=0.0)
+        L = ck.number(spec["luminance"], "environment.luminance", min_value=0.0, max_value=MAX_LUMINANCE)
         rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.color", max_value=None)
         if rgb.max() == 0.0:
             ck.fail("environment.color", "must not be black")
@@ -484,11 +485,13 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json")
     mode = cal["mode"]
     if not isinstance(mode, str) or mode not in CALIBRATION_MODES:
         ck.fail("environment.calibration.mode", f"unknown value {mode!r}; expected one of {list(CALIBRATION_MODES)}")
-    value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True)
-    rotation = ck.number(spec.get("rotation_deg", 0.0), "environment.rotation_deg")
+    limit = MAX_LUMINANCE if mode in ("mean", "max") else MAX_ABS
+    value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True,
+                      max_value=limit)
+    rotation = ck.number(spec.get("rotation_deg", 0.0), "environment.rotation_deg", min_value=-1e6, max_value=1e6)
 
     try:
-        pixels = read_image(Path(scene_dir) / image_file)
+        pixels = read_image(ck.path(scene_dir, image_file, "environment.file"))
     except ImageReadError as exc:
         raise SceneError(file, "environment.file", f"cannot read {image_file!r}: {exc.reason}") from exc
     channels = pixels.shape[2]
@@ -496,6 +499,10 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json")
         ck.fail("environment.file", f"{image_file!r} has {channels} channels; expected 1 to 4")
     rgb = np.repeat(pixels[..., :1], 3, axis=2) if channels <= 2 else pixels[..., :3]
     try:
-        return HdriEnvironment(rgb, mode, value, rotation, source=image_file)
+        env = HdriEnvironment(rgb, mode, value, rotation, source=image_file)
     except ValueError as exc:
         raise SceneError(file, "environment.file", f"{image_file!r}: {exc}") from exc
+    if not env.max_luminance <= MAX_LUMINANCE:
+        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "
+                                                 f"cd/m^2, above {MAX_LUMINANCE:g}")
+    return env

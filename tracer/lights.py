@@ -32,6 +32,7 @@ import numpy as np
 from .sampling import Distribution1D, TriangleSet
 from .schema import Field, Schema
 from .units import MM2_TO_M2, lambertian_luminance_cd_m2, luminance, normalize_color
+from .validate import MAX_FLUX, MAX_LUMINANCE
 from .vec import F32, dot, norm
 
 #: Importance-driven cluster choice is used up to this many emitting objects (beyond it, power alone).
@@ -50,11 +51,11 @@ def _emission_check(params: dict, fail):
 #: The "emission" block of a scene object (also the fields of the legacy material type "emitter").
 EMISSION = Schema(
     "emission", "Emission", "Lambertian emission from the object's front side (both sides if two-sided)",
-    (Field("luminance", "number", None, unit="cd/m^2", minimum=0.0, label="Luminance",
+    (Field("luminance", "number", None, unit="cd/m^2", minimum=0.0, maximum=MAX_LUMINANCE, label="Luminance",
            description="Luminance of the emitting surface, cd/m^2 (give this or the flux)", ui_default=1000.0),
-     Field("flux", "number", None, unit="lm", minimum=0.0, label="Flux",
+     Field("flux", "number", None, unit="lm", minimum=0.0, maximum=MAX_FLUX, label="Flux",
            description="Luminous flux of the whole object, lm (give this or the luminance)", ui_default=1.0),
-     Field("color", "rgb", [1.0, 1.0, 1.0], unit="1", minimum=0.0, label="Color",
+     Field("color", "rgb", [1.0, 1.0, 1.0], unit="1", minimum=0.0, maximum=1e6, label="Color",
            description="Linear Rec.709 colour; scaled so that its luminance is the given one"),
      Field("two_sided", "bool", False, label="Two-sided", description="Emit from both sides")),
     can_aim=True, alternatives=(("luminance",), ("flux",)), check=_emission_check)

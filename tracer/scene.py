@@ -66,7 +66,20 @@ from .lights import EMISSION, Emission, make_emission
 from .optics.materials import MATERIALS
 from .pupil import pupil_diameter_mm
 from .schema import fail_in, parse_block
-from .validate import FieldChecker
+from .validate import (
+    BYTES_PER_PIXEL,
+    MAX_COORD_MM,
+    MAX_DISTANCE_MM,
+    MAX_FOCAL_MM,
+    MAX_LUMINANCE,
+    MAX_PIXELS,
+    MAX_PUPIL_MM,
+    MAX_SCALE,
+    MIN_SCALE,
+    FieldChecker,
+    parse_json,
+    physical_memory_bytes,
+)
 
 FORMAT = "hud-scene"
 VERSION = 1
@@ -210,18 +223,24 @@ def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
         rows = spec["matrix"]
         if not isinstance(rows, list) or len(rows) != 4:
             ck.fail(f"{fld}.matrix", "expected 4 rows of 4 numbers")
-        m = np.array([ck.vector(r, f"{fld}.matrix[{i}]", 4) for i, r in enumerate(rows)])
+        m = np.array([ck.vector(r, f"{fld}.matrix[{i}]", 4, MAX_COORD_MM) for i, r in enumerate(rows)])
         if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-9):
             ck.fail(f"{fld}.matrix[3]", "the last row must be [0, 0, 0, 1] (affine transforms only)")
+        where = f"{fld}.matrix"
     else:
         ck.keys(spec, fld, set(), {"translate", "rotate_deg", "scale"})
-        t = ck.vector(spec.get("translate", [0, 0, 0]), f"{fld}.translate")
-        r = ck.vector(spec.get("rotate_deg", [0, 0, 0]), f"{fld}.rotate_deg")
+        t = ck.position(spec.get("translate", [0, 0, 0]), f"{fld}.translate")
+        r = ck.vector(spec.get("rotate_deg", [0, 0, 0]), f"{fld}.rotate_deg", 3, 1e6)
         s_raw = spec.get("scale", [1, 1, 1])
+        where = f"{fld}.scale"
         if isinstance(s_raw, list):
-            s = ck.vector(s_raw, f"{fld}.scale")
+            s = ck.vector(s_raw, where)
         else:
-            s = np.full(3, ck.number(s_raw, f"{fld}.scale"))
+            s = np.full(3, ck.number(s_raw, where))
+        for i in range(3):
+            if not MIN_SCALE <= abs(s[i]) <= MAX_SCALE:
+                ck.fail(where if not isinstance(s_raw, list) else f"{where}[{i}]",
+                        f"must be {MIN_SCALE:g} to {MAX_SCALE:g} in magnitude, got {s[i]:g}")
         m = np.eye(4)
         m[:3, :3] = _rotation_xyz(r) @ np.diag(s)
         m[:3, 3] = t
@@ -230,6 +249,9 @@ def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
     if sv.min() <= 1e-9 * max(sv.max(), 1e-300):
         ck.fail(fld, f"degenerate transform (singular values {np.array2string(sv, precision=3)}): "
                      "it flattens the mesh")
+    if sv.min() < MIN_SCALE or sv.max() > MAX_SCALE:
+        ck.fail(where, f"scales lengths by {sv.min():.3g} to {sv.max():.3g}; each must be {MIN_SCALE:g} to "
+                       f"{MAX_SCALE:g}")
     return m
 
 
@@ -280,8 +302,12 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     """(vertices (v,3), faces (f,3), uv (v,2) or None) from PLY/OBJ/GLB through trimesh."""
     import trimesh
 
-    path = root / rel
-    if not path.is_file():
+    path = ck.path(root, rel, fld)
+    try:
+        found = path.is_file()
+    except OSError as e:
+        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
+    if not found:
         ck.fail(fld, f"mesh file not found: {rel}")
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True)
@@ -312,14 +338,47 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     return v, f, uv
 
 
+def _check_closed_outward(ck: FieldChecker, vw: np.ndarray, faces: np.ndarray, fld: str, rel: str):
+    """A dielectric bounds a volume of glass: its mesh must be closed (every edge shared by exactly two
+    triangles), consistently oriented (the two run their edge in opposite directions) and face outward
+    (a positive enclosed volume), or refraction would enter glass where there is none. Vertices at the
+    same position (to 1e-7 of the mesh's size) are merged first: exporters split them at seams."""
+    size = max(float(np.ptp(vw, axis=0).max()), 1e-300)
+    key = np.round(vw / (1e-7 * size)).astype(np.int64)
+    _, merged = np.unique(key, axis=0, return_inverse=True)
+    tri = merged.reshape(-1)[faces]
+    tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 2] != tri[:, 0])]
+    n = int(merged.max()) + 1
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    _, undirected_count = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_counts=True)
+    _, directed_count = np.unique(a * n + b, return_counts=True)
+    what = "a dielectric must be a closed surface with outward normals (it bounds the glass)"
+    if np.any(undirected_count == 1):
+        ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count == 1))} edges belong to one triangle only "
+                     "(the surface is open)")
+    if np.any(undirected_count > 2):
+        ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count > 2))} edges belong to more than two triangles")
+    if np.any(directed_count > 1):
+        ck.fail(fld, f"{rel}: {what}: {int(np.sum(directed_count > 1))} edges are run the same way by both their "
+                     "triangles (the faces are not consistently oriented)")
+    v0, v1, v2 = (vw[faces[:, k]] for k in range(3))
+    volume = float(np.einsum("ij,ij->", v0, np.cross(v1 - v0, v2 - v0))) / 6.0
+    if volume <= 0:
+        ck.fail(fld, f"{rel}: {what}: the normals point inward (enclosed volume {volume:.4g} mm^3); reverse the "
+                     "faces' winding")
+
+
 def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
     """SHA-256 of scene.json and every file it references (first 16 hex digits)."""
     h = hashlib.sha256(raw_bytes)
     for rel in sorted(set(files)):
         p = root / rel
         h.update(rel.encode())
-        if p.is_file():
+        try:
             h.update(p.read_bytes())
+        except OSError:
+            pass  # a file the loader could read and then not: hashed by name only
     return h.hexdigest()[:16]
 
 
@@ -328,7 +387,7 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
             {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age"})
-    pos = ck.vector(spec["position"], "eye.position")
+    pos = ck.position(spec["position"], "eye.position")
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")
     if np.linalg.norm(np.cross(gaze, up)) < 1e-6:
@@ -336,7 +395,8 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     if spec["pupil_diameter_mm"] == "auto":
         # Watson & Yellott (2012) for the adaptation luminance: given, or the environment's mean.
         if "adaptation_luminance_cd_m2" in spec:
-            adapt = ck.number(spec["adaptation_luminance_cd_m2"], "eye.adaptation_luminance_cd_m2", min_value=0.0)
+            adapt = ck.number(spec["adaptation_luminance_cd_m2"], "eye.adaptation_luminance_cd_m2", min_value=0.0,
+                              max_value=MAX_LUMINANCE)
         elif not environment.is_black:
             adapt = environment.mean_luminance
         else:
@@ -344,17 +404,28 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
         age = ck.number(spec.get("observer_age", 30.0), "eye.observer_age", min_value=1.0, max_value=120.0)
         pupil = pupil_diameter_mm(adapt, age_years=age)
     else:
-        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True)
-    focal = ck.number(spec.get("focal_length_mm", 16.67), "eye.focal_length_mm", min_value=0.0, min_exclusive=True)
+        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True,
+                          max_value=MAX_PUPIL_MM)
+    focal = ck.number(spec.get("focal_length_mm", 16.67), "eye.focal_length_mm", min_value=0.0, min_exclusive=True,
+                      max_value=MAX_FOCAL_MM)
     acc_raw = spec.get("accommodation_distance_mm", "infinity")
     if acc_raw == "infinity":
         acc = math.inf
     else:
-        acc = ck.number(acc_raw, "eye.accommodation_distance_mm", min_value=0.0, min_exclusive=True)
+        acc = ck.number(acc_raw, "eye.accommodation_distance_mm", min_value=0.0, min_exclusive=True,
+                        max_value=MAX_DISTANCE_MM)
     res = spec["resolution"]
     if (not isinstance(res, list) or len(res) != 2
             or not all(isinstance(r, int) and not isinstance(r, bool) and 1 <= r <= 16384 for r in res)):
-        ck.fail("eye.resolution", f"expected [width, height], integers in 1..16384, got {json.dumps(res)}")
+        ck.fail("eye.resolution", f"expected [width, height], integers in 1..16384, got {json.dumps(res)[:80]}")
+    need = res[0] * res[1] * BYTES_PER_PIXEL
+    memory = physical_memory_bytes()
+    if res[0] * res[1] > MAX_PIXELS:
+        ck.fail("eye.resolution", f"{res[0]} x {res[1]} = {res[0] * res[1]:,} pixels, above the limit of "
+                                  f"{MAX_PIXELS:,} (a render needs about {need / 2**30:.1f} GiB per process)")
+    if memory is not None and need > memory / 2:
+        ck.fail("eye.resolution", f"{res[0]} x {res[1]} pixels need about {need / 2**30:.1f} GiB per process; this "
+                                  f"machine has {memory / 2**30:.1f} GiB (the limit is half of it)")
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
     if np.any(fov <= 0) or np.any(fov >= 170):
         ck.fail("eye.fov_deg", "each field angle must lie in (0, 170) degrees")
@@ -381,8 +452,10 @@ def _methods(ck: FieldChecker, raw: dict, scene: Scene) -> dict[str, dict]:
     return out
 
 
-def load_scene(path: str | Path) -> Scene:
+def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     """Read and validate a scene folder (or a scene.json path).
+
+    Files the scene names (meshes, images) must lie inside its folder unless ``allow_external``.
 
     Raises
     ------
@@ -390,17 +463,21 @@ def load_scene(path: str | Path) -> Scene:
         For any problem, naming the file and the field.
     """
     path = Path(path)
-    root = path.parent if path.is_file() else path
-    file = root / SCENE_FILE
-    fname = str(file)
-    if not file.is_file():
-        raise SceneError(fname, "", "scene file not found (a scene is a folder with scene.json)")
-    raw_bytes = file.read_bytes()
     try:
-        raw = json.loads(raw_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        root = path.parent if path.is_file() else path
+        file = root / SCENE_FILE
+        fname = str(file)
+        if not file.is_file():
+            raise SceneError(fname, "", "scene file not found (a scene is a folder with scene.json)")
+        raw_bytes = file.read_bytes()
+    except OSError as e:
+        raise SceneError(str(path), "", f"cannot be read ({e.strerror or e})") from None
+    try:
+        text = raw_bytes.decode("utf-8")
+    except UnicodeDecodeError as e:
         raise SceneError(fname, "", f"malformed JSON: {e}") from None
-    ck = FieldChecker(fname)
+    raw = parse_json(text, fname)
+    ck = FieldChecker(fname, allow_external)
     ck.obj(raw, "")
     ck.keys(raw, "", {"format", "version", "eye", "objects"},
             {"name", "description", "environment", "methods", "backward", "forward"})
@@ -408,7 +485,7 @@ def load_scene(path: str | Path) -> Scene:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
     if raw["version"] != VERSION:
         ck.fail("version", f"this tracer reads version {VERSION}, got {json.dumps(raw['version'])}")
-    env = environment_from_spec(raw.get("environment", {"type": "none"}), root, fname)
+    env = environment_from_spec(raw.get("environment", {"type": "none"}), root, fname, allow_external)
     eye = _eye(ck, raw["eye"], env)
 
     objs_raw = raw["objects"]
@@ -439,7 +516,13 @@ def load_scene(path: str | Path) -> Scene:
         v, f, uv = _load_mesh(ck, root, rel, f"{fld}.mesh")
         if f.min() < 0 or f.max() >= len(v):
             ck.fail(f"{fld}.mesh", f"{rel}: face indices out of range")
+        if np.abs(v).max() > MAX_COORD_MM:
+            ck.fail(f"{fld}.mesh", f"{rel}: vertex coordinates reach {np.abs(v).max():.3g} mm; they must lie within "
+                                   f"+-{MAX_COORD_MM:g} mm")
         vw = v[:, :1] * m[:3, 0] + v[:, 1:2] * m[:3, 1] + v[:, 2:3] * m[:3, 2] + m[:3, 3]  # fixed order
+        if np.abs(vw).max() > MAX_COORD_MM:
+            ck.fail(f"{fld}.transform", f"places {rel} {np.abs(vw).max():.3g} mm from the origin; the scene must lie "
+                                        f"within +-{MAX_COORD_MM:g} mm")
         if np.linalg.det(m[:3, :3]) < 0:
             f = f[:, ::-1]  # a mirroring transform would turn the normals inside out
         smooth = ck.boolean(o.get("smooth_normals", False), f"{fld}.smooth_normals")
@@ -454,12 +537,18 @@ def load_scene(path: str | Path) -> Scene:
                 np.add.at(vn, f[:, k], cross)
             lengths = np.sqrt(vn[:, 0] * vn[:, 0] + vn[:, 1] * vn[:, 1] + vn[:, 2] * vn[:, 2])
             normals = np.divide(vn, lengths[:, None], out=np.zeros_like(vn), where=lengths[:, None] > 0)
+        if mat.type == "dielectric":
+            _check_closed_outward(ck, vw, f, f"{fld}.mesh", rel)
         if mat.type == "lcd" and uv is None:
             ck.fail(f"{fld}.mesh", f"{rel}: an LCD needs texture coordinates (an OBJ with vt lines)")
         lx = m[:3, :3] @ np.array([1.0, 0.0, 0.0])
         obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx / np.linalg.norm(lx))
         if emission is not None:
             obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
+            if obj.emission.luminance > MAX_LUMINANCE:
+                where = "emission" if "emission" in o else "material"
+                ck.fail(f"{fld}.{where}.flux", f"gives a luminance of {obj.emission.luminance:.3g} cd/m^2 over the "
+                                               f"object's {obj.area_mm2:.3g} mm^2, above {MAX_LUMINANCE:g}")
         objects.append(obj)
 
     # Aim targets must exist; apertures must be planar for the solid-angle pdf to be exact.

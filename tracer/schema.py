@@ -167,7 +167,7 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
         from .imageio import read_image
 
         try:
-            img = read_image(Path(root) / rel, linear=(enc == "linear"))
+            img = read_image(ck.path(root, rel, fld), linear=(enc == "linear"))
         except ImageReadError as e:
             raise SceneError(ck.file, fld, f"cannot read {rel}: {e.reason}") from None
         img = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)

@@ -30,8 +30,11 @@ def fresnel_unpolarized(cos_i: np.ndarray, eta: np.ndarray | float):
     sin2_t = (1 - cos_i * cos_i) / (eta * eta)
     tir = sin2_t >= 1
     cos_t = np.sqrt(np.clip(1 - sin2_t, 0, 1))
-    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    # Both denominators vanish only at grazing incidence under total internal reflection (cos_i =
+    # cos_t = 0), where R = 1 is taken below: divide by 1 there instead of making 0/0.
+    den_s, den_p = cos_i + eta * cos_t, eta * cos_i + cos_t
+    rs = (cos_i - eta * cos_t) / np.where(den_s > 0, den_s, 1)
+    rp = (eta * cos_i - cos_t) / np.where(den_p > 0, den_p, 1)
     r = 0.5 * (rs * rs + rp * rp)
     return np.where(tir, 1, r), np.where(tir, 0, cos_t)
 

@@ -25,6 +25,9 @@ from .fresnel import fresnel_unpolarized, refract
 #: not exist in float32).
 TINY = F32(1e-30)
 
+#: Largest refractive index (germanium, the highest of optical materials, is about 4).
+MAX_IOR = 10.0
+
 #: The materials by scene.json type name.
 MATERIALS: dict[str, type[BSDF]] = {}
 
@@ -113,9 +116,9 @@ class Dielectric(BSDF):
     """
 
     schema = Schema("dielectric", "Dielectric (glass)", "Smooth glass surface: Fresnel reflection and refraction",
-                    (Field("ior", "number", unit="1", minimum=1.0, label="IOR",
+                    (Field("ior", "number", unit="1", minimum=1.0, maximum=MAX_IOR, label="IOR",
                            description="Refractive index inside the mesh (behind its normals)", ui_default=1.52),
-                     Field("ior_outside", "number", 1.0, unit="1", minimum=1.0, label="IOR outside",
+                     Field("ior_outside", "number", 1.0, unit="1", minimum=1.0, maximum=MAX_IOR, label="IOR outside",
                            description="Refractive index on the normals' side")))
     flags = DELTA | REFLECTION | TRANSMISSION
     dims = 1
@@ -221,8 +224,8 @@ class LCD(BSDF):
                            description="How 8-bit slide values map to transmittance"),
                      _rgb("transmittance", 1.0, "Transmittance", "Transmittance of a clear cell, 0..1",
                           required=False),
-                     Field("contrast_ratio", "number", 300.0, unit="1", minimum=1.0, label="Contrast ratio",
-                           description="Clear-cell over black-cell transmittance")))
+                     Field("contrast_ratio", "number", 300.0, unit="1", minimum=1.0, maximum=1e9,
+                           label="Contrast ratio", description="Clear-cell over black-cell transmittance")))
     flags = DELTA | TRANSMISSION
 
     def __init__(self, objects):
