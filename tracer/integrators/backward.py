@@ -38,11 +38,13 @@ from ..sampling import uniform_disk_concentric
 from ..schema import Field
 from ..units import luminance3
 from ..vec import F32, dot
-from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
+from .base import MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
 
 #: Strata whose acceptance by rejection sampling would be below this are not worth stratifying.
 MIN_ACCEPTANCE = 1e-3
+#: Candidates per round of that rejection sampling (bounds its memory: 16 MiB).
+MAX_CANDIDATES = 1 << 20
 #: A path splits at a glass surface or coating only where the smaller branch carries at least this
 #: share of the two (glass at normal incidence reflects 4 %: there the Fresnel choice is kept).
 SPLIT_MIN = 0.05
@@ -65,9 +67,9 @@ EXIT_PUPIL = Field(
     description="Eq. (3) strata: a disk in the pupil plane that receives a share of the samples",
     fields=(Field("object", "object_ref", None, label="Object",
                   description="An object whose outline, projected along the gaze, is the exit pupil"),
-            Field("center_mm", "vector2", None, unit="mm", label="Centre",
+            Field("center_mm", "vector2", None, unit="mm", minimum=-1e4, maximum=1e4, label="Centre",
                   description="Centre of the exit pupil in eye coordinates (right, up), mm"),
-            Field("radius_mm", "number", None, unit="mm", minimum=0.0, exclusive_min=True, label="Radius",
+            Field("radius_mm", "number", None, unit="mm", minimum=0.0, exclusive_min=True, maximum=1e4, label="Radius",
                   description="Radius of the exit pupil, mm"),
             Field("share", "number", unit="1", minimum=0.0, maximum=1.0, label="Share",
                   description="Share of the samples sent into the exit pupil, below 1", ui_default=0.5)),
@@ -77,6 +79,8 @@ EXIT_PUPIL = Field(
 @register
 class BackwardTracer(Integrator, PathMethod):
     name = "backward"
+    noise_advice = (", or use the forward method, which suits small sources that scattering surfaces see only "
+                    "through lenses, mirrors or glass (next-event estimation cannot connect through them)")
     summary = "retina -> pupil -> optics -> sources, next-event estimation (paper sec. 2, eq. 3 strata)"
     options = (MAX_DEPTH,
                Field("next_event", "bool", True, label="Next-event estimation",
@@ -112,7 +116,7 @@ class BackwardTracer(Integrator, PathMethod):
             center = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
             ep["center_mm"], ep["radius_mm"] = center, float(np.linalg.norm(xy - center, axis=1).max())
 
-    def __init__(self, world, seed, batch_size=DEFAULT_BATCH, options=None):
+    def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)
         w = self.world
         self.next_event = bool(self.opts["next_event"])
@@ -152,7 +156,7 @@ class BackwardTracer(Integrator, PathMethod):
         accept = target / area
         out = np.empty((2, 0))
         while out.shape[1] < n:
-            k = int((n - out.shape[1]) / accept * 1.2) + 16
+            k = min(int((n - out.shape[1]) / accept * 1.2) + 16, MAX_CANDIDATES)
             cand = uniform_disk_concentric(rng.random((2, k)))
             cand = center[:, None] + radius * cand if from_stop else a * cand
             in_pupil = cand[0] * cand[0] + cand[1] * cand[1] <= a * a

@@ -23,9 +23,10 @@ import numpy as np
 from ..film import Film, Splats
 from ..sampling import make_rng
 from ..schema import Field, parse_block
+from ..units import luminance
 from ..validate import FieldChecker
 from ..world import World
-from .path import Context, Roulette, Timers
+from .path import CUT_KEY, PROBE_DEPTH, PROBE_KEY, Context, Roulette, Timers
 
 #: Paths per batch: the unit of work that is seed-addressed, distributed and merged.
 DEFAULT_BATCH = 1 << 17
@@ -35,8 +36,19 @@ DEFAULT_BATCH = 1 << 17
 WAVE = 1 << 16
 #: The random stream of a method's pilot (the roulette's reference luminance): (seed, PILOT_STREAM).
 PILOT_STREAM = 2**31 - 1
+#: The random stream of batch k's probe of paths cut at max_depth: (seed, k, PROBE_STREAM).
+PROBE_STREAM = 1
 #: Paths in a pilot.
 PILOT_PATHS = 1 << 14
+#: With a budget in seconds and no batch size given, a batch is sized from the pilot's pace to take
+#: at most this share of the budget, so that the render ends within a few percent of it (a batch is
+#: never cut short: it is the unit that is seed-addressed and merged).
+BATCH_SHARE_OF_TIME = 0.02
+#: The smallest batch that sizing chooses, paths (the backward method also traces at least one sample
+#: per pixel per batch).
+MIN_BATCH = 1 << 12
+#: The largest batch, paths (its planes must fit in memory many times over).
+MAX_BATCH = 1 << 24
 
 Progress = Callable[[float, str], None]
 ShouldStop = Callable[[], bool]
@@ -140,15 +152,24 @@ class Integrator:
     components: dict[str, str] = {}
     #: What "efficiency" counts, for the report.
     efficiency_definition = ""
+    #: The end of the noise warning: when another method would suit the scene better (", or ...").
+    noise_advice = ""
 
-    def __init__(self, world, seed: int, batch_size: int = DEFAULT_BATCH, options: dict | None = None):
+    def __init__(self, world, seed: int, batch_size: int | None = None, options: dict | None = None):
         if not isinstance(world, World):
             world = World(world)
+        if batch_size is not None and not 1 <= int(batch_size) <= MAX_BATCH:
+            raise ValueError(f"batch size must lie in [1, {MAX_BATCH}], got {batch_size}")
+        if not 0 <= int(seed) < 2**63:
+            raise ValueError(f"seed must lie in [0, 2^63), got {seed}")
         self.world = world
         self.scene = world.scene
         self.eye = world.eye
         self.seed = int(seed)
-        self.batch_size = int(batch_size)
+        #: None given: DEFAULT_BATCH, or smaller for a short time budget (:meth:`fit_batch`).
+        self.auto_batch = batch_size is None
+        self.batch_size = DEFAULT_BATCH if batch_size is None else int(batch_size)
+        self.pilot_seconds = 0.0
         self.opts = options if options is not None else self.scene.method_options(self.name)
         self.max_depth = self.opts["max_depth"]
         self.warnings: list[str] = []
@@ -189,13 +210,26 @@ class Integrator:
             saved, truncated = self.batch_size, self.truncated
             self.batch_size = PILOT_PATHS
             rays0 = self.world.rays_traced
+            t0 = time.perf_counter()
             try:
                 ctx = Context(self.world, make_rng(self.seed, PILOT_STREAM), Timers(), Splats(), None)
                 self._reference = self.pilot_mean(ctx)
             finally:
                 self.batch_size, self.truncated = saved, truncated
+            self.pilot_seconds = time.perf_counter() - t0
             self.pilot_rays = self.world.rays_traced - rays0
         return self._reference
+
+    def fit_batch(self, budget: Budget):
+        """With a budget in seconds and no batch size given, size batches from the pilot's pace (paths
+        per second, without roulette: an underestimate) so that one takes at most
+        :data:`BATCH_SHARE_OF_TIME` of the budget; between :data:`MIN_BATCH` and :data:`DEFAULT_BATCH`."""
+        if not self.auto_batch or budget.seconds is None:
+            return
+        self.reference_luminance  # noqa: B018  (runs and times the pilot once)
+        pace = PILOT_PATHS / max(self.pilot_seconds, 1e-6)
+        fitted = int(pace * budget.seconds * BATCH_SHARE_OF_TIME)
+        self.batch_size = int(min(DEFAULT_BATCH, max(MIN_BATCH, fitted)))
 
     def trace_batch(self, index: int) -> BatchResult:
         """Trace batch ``index`` into a film of its own: what :func:`drive` merges, in this process or
@@ -203,7 +237,8 @@ class Integrator:
         reference = self.reference_luminance
         t0 = time.perf_counter()
         timers = Timers()
-        ctx = Context(self.world, make_rng(self.seed, index), timers, Splats(), Roulette(reference))
+        ctx = Context(self.world, make_rng(self.seed, index), timers, Splats(), Roulette(reference),
+                      probe_rng=make_rng(self.seed, index, PROBE_STREAM))
         rays_before, truncated_before = self.world.rays_traced, self.truncated
         paths, found, norms, reps = self.run_batch(ctx)
         with timers("film"):
@@ -217,6 +252,7 @@ class Integrator:
                should_stop: ShouldStop | None = None) -> RenderResult:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
+        self.fit_batch(budget)
         return drive(self, budget, LocalExecutor(self), 1, progress, should_stop)
 
     def merge_extra(self, total: dict, batch: dict):
@@ -229,18 +265,44 @@ class Integrator:
         result.extra["roulette"] = {"reference_luminance_cd_m2": self.reference_luminance,
                                     "threshold_cd_m2": Roulette(self.reference_luminance).threshold,
                                     "pilot_rays": self.pilot_rays}
-        if result.found == 0:
+        if result.found == 0 and len(self.world.lights) == 0 and self.world.environment.is_black:
+            result.warnings.append(
+                "the scene has no light source (no object with an emission block of positive luminance, no lit "
+                "environment): the image is black because the scene is dark")
+        elif result.found == 0:
             result.warnings.append(
                 f"no light path found: {result.method} traced {result.paths:,} paths ({result.rays:,} rays) and "
-                f"none {self.found_what} (efficiency {result.efficiency:.3g}); the image is black because the "
-                "method failed, not because the scene is dark")
+                f"none {self.found_what} (efficiency {result.efficiency:.3g}): the scene has light, so either none "
+                "of it reaches the eye or this method cannot find it (try the other method, or more rays)")
         elif result.found < 100:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
-        if result.paths and self.truncated / result.paths > 1e-3:
-            result.warnings.append(f"{self.truncated:,} paths were cut at methods.{self.name}.max_depth = "
-                                   f"{self.max_depth}: the image is biased low; raise max_depth")
+        self._report_cut(result)
+
+    def _report_cut(self, result: RenderResult):
+        """The light of paths cut at max_depth, as the probe measured it (tracer.integrators.path.probe_cut),
+        in ``extra["max_depth_cut"]``; a warning where it exceeds twice the image mean's standard error."""
+        cut = result.extra.pop(CUT_KEY, 0)
+        sums = {k.split(":", 1)[1]: result.extra.pop(k) for k in list(result.extra) if k.startswith(PROBE_KEY + ":")}
+        if not cut:
+            return
+        film = result.film
+        npix = film.width * film.height
+        missing = sum(v / film.norm[c] for c, v in sums.items() if film.norm.get(c)) / npix
+        mean = float(luminance(film.rgb()).mean())
+        se = math.sqrt(float(film.variance_y().sum())) / npix
+        result.extra["max_depth_cut"] = {
+            "paths": int(cut), "probe_segments": PROBE_DEPTH,
+            "missing_luminance_cd_m2": missing, "missing_share_of_mean": missing / mean if mean > 0 else None,
+            "image_mean_standard_error_cd_m2": se}
+        if missing > 2 * se:
+            share = f" ({missing / mean:.2%} of it)" if mean > 0 else ""
+            result.warnings.append(
+                f"{cut:,} paths were cut at methods.{self.name}.max_depth = {self.max_depth}; followed "
+                f"{PROBE_DEPTH} segments further they add {missing:.3g} cd/m^2 to the image mean{share}, "
+                f"{missing / se if se > 0 else math.inf:.1f} times its standard error: the image is biased low; "
+                "raise max_depth")
 
     found_what = "found light"
 

@@ -20,7 +20,7 @@ from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..units import luminance3
 from ..vec import F32
-from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, Integrator, register
+from .base import MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, continue_by_sampling, trace
 
 #: Replicates per batch: particles are dealt round-robin into this many groups (tracer.film).
@@ -30,6 +30,8 @@ REPLICATES = 8
 @register
 class ForwardTracer(Integrator, PathMethod):
     name = "forward"
+    noise_advice = (", or use the backward method, whose next-event estimation suits sources that a scattering "
+                    "surface sees directly")
     summary = "sources -> optics -> pupil -> retina (paper sec. 2, directed split)"
     options = (MAX_DEPTH,)
     components = {"light": "particles emitted"}
@@ -37,13 +39,14 @@ class ForwardTracer(Integrator, PathMethod):
     efficiency_definition = "particles that reached the retina / particles emitted"
     found_what = "reached the retina"
 
-    def __init__(self, world, seed, batch_size=DEFAULT_BATCH, options=None):
+    def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)
         w = self.world
         self.lights = w.lights
-        if self.lights.total_flux_lm <= 0:
-            self.warnings.append("the scene has no emitter with positive flux: forward tracing has nothing to trace")
-        if not w.environment.is_black:
+        if self.lights.total_flux_lm <= 0 and not w.environment.is_black:
+            self.warnings.append("the scene's only light is its environment, which forward tracing does not emit "
+                                 "from: the image stays black; render it with the backward method")
+        elif not w.environment.is_black:
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
                                  "method (the hybrid method of a later release merges both)")
         slots = len(self.scene.objects)

@@ -265,6 +265,8 @@ class Context:
     #: Paths that found light (the method's efficiency numerator), or a flag per camera sample.
     found: int = 0
     sample_found: np.ndarray | None = None
+    #: The random stream of the probe of paths cut at max_depth (:func:`probe_cut`); None: no probe.
+    probe_rng: np.random.Generator | None = None
 
 
 @dataclass
@@ -352,9 +354,39 @@ def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
                      nxt.specular[keep], {k: v[keep] for k, v in nxt.extra.items()})
 
 
-def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) -> int:
+#: Paths cut at max_depth are followed this many segments further by :func:`probe_cut`.
+PROBE_DEPTH = 16
+#: ``ctx.store`` keys of the probe's tallies: the luminance the cut paths would have added, per film
+#: component (sums of Y, not normalised), and the number of cut paths.
+PROBE_KEY, CUT_KEY = "cut_luminance_sum", "cut_paths"
+
+
+def probe_cut(method: PathMethod, state: PathState, ctx: Context):
+    """Follow the paths cut at max_depth for :data:`PROBE_DEPTH` more segments on their own random
+    stream, into a tally kept out of the image (``ctx.store``): an unbiased estimate of the light those
+    segments carry, which the report sets against the image's noise. The image, the efficiency and
+    the method's own figures are left as they were."""
+    saved = ctx.splats, ctx.found, ctx.rng, dict(ctx.store)
+    flags = None if ctx.sample_found is None else ctx.sample_found.copy()
+    ctx.splats, ctx.rng = type(saved[0])(), ctx.probe_rng
+    try:
+        trace(method, state, ctx, PROBE_DEPTH, probe=False)
+        tally = {comp: float(luminance3(ctx.splats.gather(comp)[2]).sum()) for comp in ctx.splats.parts}
+    finally:
+        ctx.splats, ctx.found, ctx.rng = saved[:3]
+        ctx.store.clear()
+        ctx.store.update(saved[3])
+        if flags is not None:
+            ctx.sample_found[:] = flags
+    for comp, y in tally.items():
+        ctx.store[f"{PROBE_KEY}:{comp}"] = ctx.store.get(f"{PROBE_KEY}:{comp}", 0.0) + y
+    ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
+
+
+def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, probe: bool = True) -> int:
     """Run paths through the loop until they end or reach ``max_depth`` segments; returns the number
-    of paths still alive at the limit (cut: a bias the report warns of)."""
+    of paths still alive at the limit (cut: a bias). With ``probe`` and a ``ctx.probe_rng``, the cut
+    paths are followed further into a tally (:func:`probe_cut`) that measures that bias."""
     world, timers = ctx.world, ctx.timers
     accel = world.accel
     materials = world.materials
@@ -430,4 +462,6 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int) ->
                 method.deliver(sh, ~blocked, ctx)
         with timers("shade"):
             state = _compact(method, nxt, ctx)
+    if len(state) and probe and ctx.probe_rng is not None:
+        probe_cut(method, state, ctx)
     return len(state)
