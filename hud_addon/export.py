@@ -3,13 +3,23 @@
 Only objects with an optical role are exported, as evaluated meshes (modifiers applied), with their
 world matrix; Blender's metres (times the scene's unit scale) become millimetres. The active camera
 is the eye; the World's HUD settings are the environment.
+
+An export is written as a set (:func:`export_scene`): first everything that can be checked in Blender
+is checked (camera, images, aim objects) and the scene description is built with nothing written; then
+every file goes into a hidden staging folder beside the target, the staging folder is checked, and only
+then it takes the target's place. A failure at any step leaves an earlier export in the target exactly
+as it was.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
+import sys
+import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 import bpy
@@ -24,11 +34,115 @@ from . import schema_ui
 
 #: Metres to millimetres.
 M_TO_MM = 1000.0
+#: What an export folder holds; a folder holding anything else is not replaced (see _check_replaceable).
+EXPORT_ENTRIES = frozenset({"scene.json", "meshes", "textures"})
+#: Files the file manager of an OS puts into any folder it shows: replaced along with an export.
+_OS_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
+#: File names Windows refuses whatever their extension.
+_WINDOWS_RESERVED = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
+                               *(f"LPT{i}" for i in range(1, 10))})
 
 
 def _unit_mm(scene) -> float:
     """Millimetres per Blender unit."""
     return M_TO_MM * scene.unit_settings.scale_length
+
+
+class _FileNames:
+    """Unique, readable file stems within one folder of the export.
+
+    A stem is the name made safe for file systems (``bpy.path.clean_name``); when that stem is taken,
+    "-2", "-3", ... is appended. Stems are compared case-insensitively, so that no two files of an
+    export collide on the case-insensitive file systems of Windows and macOS either. The same claims
+    in the same order give the same stems.
+    """
+
+    def __init__(self):
+        self._taken: set[str] = set()
+
+    def claim(self, name: str) -> str:
+        base = bpy.path.clean_name(name) or "unnamed"
+        if base.upper() in _WINDOWS_RESERVED:
+            base += "_"
+        stem, k = base, 1
+        while stem.casefold() in self._taken:
+            k += 1
+            stem = f"{base}-{k}"
+        self._taken.add(stem.casefold())
+        return stem
+
+
+class _Plan:
+    """The files of one export, each checked when it is planned and written only by :meth:`write`.
+
+    ``files`` maps a path relative to the export folder to the function that writes it (given the
+    absolute path to write to).
+    """
+
+    def __init__(self):
+        self.files: dict[str, Callable[[Path], None]] = {}
+        self.textures = _FileNames()
+
+    def add(self, rel: str, write: Callable[[Path], None]) -> str:
+        assert rel not in self.files, rel  # stems are unique
+        self.files[rel] = write
+        return rel
+
+    def image(self, image, name: str, what: str) -> str:
+        """Plan a texture file for ``image`` named after ``name`` (made unique); returns its path
+        relative to the folder. Raises ValueError, naming ``what``, the image and, for an image
+        kept in a file, the file's path, when the image cannot be read."""
+        suffix, write = _image_writer(image, what)
+        return self.add(f"textures/{self.textures.claim(name)}{suffix}", write)
+
+    def write(self, folder: Path):
+        """Write every planned file under ``folder``."""
+        for rel, write in self.files.items():
+            path = folder / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write(path)
+
+
+def _image_writer(image, what: str) -> tuple[str, Callable[[Path], None]]:
+    """(file suffix, write(path)) of an image, checked now: an image kept in a file (not packed) is
+    copied as it is, and that file must exist and be readable; a packed or generated image is
+    written as EXR with its pixel values as stored, and must have pixels.
+
+    Raises ValueError "<what> image '<name>' cannot be read: <path> (<reason>)" or
+    "<what> image '<name>' has no pixels".
+    """
+    label = f"{what} image {image.name!r}"
+    raw = image.filepath_raw or image.filepath
+    src = Path(bpy.path.abspath(raw)) if raw else None
+    from_file = image.packed_file is None and src is not None and (image.source == "FILE" or src.is_file())
+    if from_file:
+        reason = None
+        if not src.exists():
+            reason = "file not found"
+        elif not src.is_file():
+            reason = "not a file"
+        else:
+            try:
+                with open(src, "rb") as fh:
+                    if not fh.read(1):
+                        reason = "empty file"
+            except OSError as e:
+                reason = e.strerror or str(e)
+        if reason is not None:
+            raise ValueError(f"{label} cannot be read: {src} ({reason})")
+        return src.suffix.lower(), lambda path: shutil.copyfile(src, path)
+    w, h = image.size
+    if w == 0 or h == 0:
+        raise ValueError(f"{label} has no pixels")
+
+    def write(path: Path):
+        px = np.empty(w * h * image.channels, dtype=np.float32)
+        image.pixels.foreach_get(px)
+        px = px.reshape(h, w, image.channels)[::-1]  # Blender's row 0 is the bottom row
+        rgb = px[..., :3] if image.channels >= 3 else np.repeat(px[..., :1], 3, axis=2)
+        write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+
+    return ".exr", write
 
 
 def _mesh_arrays(obj, depsgraph, with_uv: bool):
@@ -56,35 +170,29 @@ def _mesh_arrays(obj, depsgraph, with_uv: bool):
         evaluated.to_mesh_clear()
 
 
+def _mesh_writer(obj, depsgraph, unit_mm: float) -> Callable[[Path], None]:
+    """write(path) of an object's evaluated mesh as OBJ in millimetres (with UVs where its material
+    has an image). Raises ValueError naming the object when the mesh has no faces."""
+    with_uv = any(f.kind == "image" for f in MATERIALS[obj.hud.role].schema.fields)
+
+    def write(path: Path):
+        co, tri, uv = _mesh_arrays(obj, depsgraph, with_uv)
+        if len(tri) == 0:
+            raise ValueError(f"object {obj.name!r}: the mesh has no faces")
+        write_obj(path, co * unit_mm, tri, uv)
+
+    return write
+
+
 def _matrix_mm(obj, unit_mm: float) -> list[list[float]]:
     m = np.array(obj.matrix_world, dtype=np.float64)
     m[:3, 3] *= unit_mm
     return m.tolist()
 
 
-def _save_image(image, folder: Path, stem: str) -> str:
-    """Copy a Blender image's file into the scene folder, or write its pixels (packed or generated
-    images) as EXR values as stored; returns the path relative to the folder."""
-    (folder / "textures").mkdir(parents=True, exist_ok=True)
-    raw = image.filepath_raw or image.filepath
-    src = Path(bpy.path.abspath(raw)) if raw else None
-    if src is not None and src.is_file() and not image.packed_file:
-        rel = f"textures/{stem}{src.suffix.lower()}"
-        shutil.copyfile(src, folder / rel)
-        return rel
-    w, h = image.size
-    if w == 0 or h == 0:
-        raise ValueError(f"image {image.name!r} has no pixels")
-    px = np.empty(w * h * image.channels, dtype=np.float32)
-    image.pixels.foreach_get(px)
-    px = px.reshape(h, w, image.channels)[::-1]  # Blender's row 0 is the bottom row
-    rgb = px[..., :3] if image.channels >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    rel = f"textures/{stem}.exr"
-    write_exr(folder / rel, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
-    return rel
-
-
 def _aim_spec(obj, prefix: str) -> dict | None:
+    """The aim block of the material (``prefix`` "") or of the emission ("emission_"), None when not
+    aimed. Raises ValueError naming the object and the block when the aim object is not chosen."""
     h = obj.hud
     kind = getattr(h, f"{prefix}aim")
     if kind == "NONE":
@@ -92,17 +200,20 @@ def _aim_spec(obj, prefix: str) -> dict | None:
     target = "eye" if kind == "EYE" else (getattr(h, f"{prefix}aim_object").name
                                          if getattr(h, f"{prefix}aim_object") else None)
     if target is None:
-        raise ValueError(f"object {obj.name!r}: aim at an object, but none is chosen")
+        block = "emission aim" if prefix else "aim"
+        raise ValueError(f"object {obj.name!r}: {block}: aim at an object, but none is chosen")
     return {"target": target, "share": getattr(h, f"{prefix}aim_share"), "mode": getattr(h, f"{prefix}aim_mode")}
 
 
-def material_spec(obj, folder: Path) -> dict:
-    """The scene.json material block of an object from its HUD role and the role's schema fields."""
+def material_spec(obj, plan: _Plan, stem: str) -> dict:
+    """The scene.json material block of an object from its HUD role and the role's schema fields;
+    its images are checked and planned as textures named "<field>_<stem>" (made unique).
+    Raises ValueError naming the object and the field."""
     h = obj.hud
     schema = MATERIALS[h.role].schema
 
     def save(image, f):
-        return _save_image(image, folder, f"{f.name}_{bpy.path.clean_name(obj.name)}")
+        return plan.image(image, f"{f.name}_{stem}", f.title)
 
     try:
         m = {"type": h.role} | schema_ui.export(h, schema.fields, "", schema.alternatives, save)
@@ -115,11 +226,15 @@ def material_spec(obj, folder: Path) -> dict:
 
 
 def emission_spec(obj) -> dict | None:
-    """The scene.json emission block of an object that emits, else None."""
+    """The scene.json emission block of an object that emits, else None. Raises ValueError naming
+    the object and the field."""
     h = obj.hud
     if not h.emits:
         return None
-    e = schema_ui.export(h, EMISSION.fields, "emission_", EMISSION.alternatives)
+    try:
+        e = schema_ui.export(h, EMISSION.fields, "emission_", EMISSION.alternatives)
+    except ValueError as err:
+        raise ValueError(f"object {obj.name!r}: emission: {err}") from None
     aim = _aim_spec(obj, "emission_")
     if aim is not None:
         e["aim"] = aim
@@ -132,7 +247,8 @@ def methods_spec(scene) -> dict:
 
 
 def eye_spec(scene) -> dict:
-    """The eye from the active camera: position, gaze (-Z), up (+Y), field from lens and sensor."""
+    """The eye from the active camera: position, gaze (-Z), up (+Y), field from lens and sensor.
+    Raises ValueError when the scene has no active camera."""
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
         raise ValueError("the scene needs an active camera: it is the eye")
@@ -163,7 +279,10 @@ def eye_spec(scene) -> dict:
     return eye
 
 
-def environment_spec(scene, folder: Path) -> dict:
+def environment_spec(scene, plan: _Plan) -> dict:
+    """The scene.json environment block from the World's HUD settings; an HDRI panorama is checked
+    and planned as the texture "environment". Raises ValueError starting "World:" (with the image's
+    file path when its file cannot be read)."""
     world = scene.world
     if world is None or world.hud.kind == "none":
         return {"type": "none"}
@@ -172,27 +291,135 @@ def environment_spec(scene, folder: Path) -> dict:
         return {"type": "uniform", "luminance": h.luminance, "color": [float(c) for c in h.color]}
     if h.image is None:
         raise ValueError("World: an HDRI environment needs a panorama image")
-    return {"type": "hdri", "file": _save_image(h.image, folder, "environment"),
+    return {"type": "hdri", "file": plan.image(h.image, "environment", "World: HDRI"),
             "calibration": {"mode": h.calibration, "value": h.value}, "rotation_deg": h.rotation_deg}
 
 
-def export_scene(depsgraph, folder) -> Path:
-    """Write the scene folder for ``depsgraph``'s scene; returns the folder."""
+def _mesh_stems(objects) -> dict[str, str]:
+    """A unique mesh file stem per object name (see _FileNames). Objects whose names are already
+    clean claim first, then the others, each group by name: "m_a" keeps m_a, "m.a" gets m_a-2,
+    whatever the order of the objects in the scene."""
+    names = _FileNames()
+    order = sorted(objects, key=lambda o: (bpy.path.clean_name(o.name) != o.name, o.name))
+    return {o.name: names.claim(o.name) for o in order}
+
+
+def _image_fields(block: dict, fields) -> list[str]:
+    """The image paths of a (material) block, groups included."""
+    out = []
+    for f in fields:
+        if f.name in block and f.kind == "image":
+            out.append(block[f.name])
+        elif f.name in block and f.kind == "group":
+            out += _image_fields(block[f.name], f.fields)
+    return out
+
+
+def _check_staged(staging: Path, target: Path, planned) -> None:
+    """Raise ValueError unless scene.json in ``staging`` parses and every file it references, and
+    every planned file, exists there and is not empty."""
+    try:
+        data = json.loads((staging / "scene.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"the export to {target} could not be checked: scene.json: {e}") from None
+    refs = set(planned)
+    for o in data["objects"]:
+        refs.add(o["mesh"])
+        refs.update(_image_fields(o["material"], MATERIALS[o["material"]["type"]].schema.fields))
+    if "file" in data["environment"]:
+        refs.add(data["environment"]["file"])
+    bad = [rel for rel in sorted(refs) if not (staging / rel).is_file() or (staging / rel).stat().st_size == 0]
+    if bad:
+        raise ValueError(f"the export to {target} is incomplete: {', '.join(bad)} missing or empty")
+
+
+def _target_folder(folder) -> Path:
+    """The absolute folder an export replaces: a symbolic link is followed (the link stays valid)."""
+    target = Path(os.path.abspath(folder))
+    if target.is_symlink():
+        target = Path(os.path.realpath(target))
+    if not target.name:
+        raise ValueError(f"cannot export into {target}: choose a folder (it is replaced as a whole)")
+    return target
+
+
+def _check_replaceable(target: Path) -> None:
+    """Raise ValueError unless ``target`` is absent, empty, or an earlier export (scene.json, meshes/,
+    textures/ and nothing else): an export replaces its folder as a whole, and must never take a
+    user's other files with it."""
+    if not target.exists():
+        return
+    if not target.is_dir():
+        raise ValueError(f"cannot export into {target}: it is a file, not a folder")
+    entries = {p.name for p in target.iterdir()} - _OS_FILES
+    if not entries:
+        return
+    foreign = sorted(entries - EXPORT_ENTRIES)
+    if foreign or "scene.json" not in entries:
+        what = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "") if foreign else "no scene.json"
+        raise ValueError(f"cannot export into {target}: it holds files that are not a HUD scene export ({what}); "
+                         "choose an empty or new folder, or an earlier export (an export replaces its folder as a "
+                         "whole)")
+
+
+def _swap_in(staging: Path, target: Path, backup: Path) -> None:
+    """Put ``staging`` in the place of ``target``. An existing target is first renamed to ``backup``
+    and renamed back if the staging folder cannot take its place; once it has, the backup is
+    removed (should that fail, the new export stands and a warning names the leftover)."""
+    if not target.exists():
+        os.rename(staging, target)
+        return
+    os.rename(target, backup)
+    try:
+        os.rename(staging, target)
+    except BaseException:
+        os.rename(backup, target)
+        raise
+    try:
+        shutil.rmtree(backup)
+    except OSError as e:
+        print(f"HUD export: written to {target}, but the earlier export's copy {backup} could not be removed: {e}",
+              file=sys.stderr)
+
+
+def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = None) -> Path:
+    """Write the scene folder for ``depsgraph``'s scene into ``folder``; returns ``folder``.
+
+    ``check(staging_folder)``, when given, is run on the complete staged export before it takes the
+    folder's place (the operator passes the tracer's ``load_scene``, so that a folder that would not
+    render never replaces one that does); whatever it raises aborts the export.
+
+    Guarantees:
+
+    - The folder is written as a set: it is either the complete new export (scene.json and every
+      mesh and texture it references, nothing else) or, after any failure, exactly what it was
+      before (an earlier export byte for byte, or absent). No hidden staging or backup folder
+      (".<name>.staging-<id>", ".<name>.backup-<id>" beside it) is left behind.
+    - Everything Blender can tell is checked before any file is written: the active camera, every
+      image (present, and a file-backed image's file readable), aim objects chosen. A scene that
+      cannot be exported raises ValueError naming the object (or "World") and the field, and for an
+      image file its path; a file system failure raises OSError.
+    - Every object gets its own mesh file, every image its own texture file: readable names
+      (``bpy.path.clean_name``), made unique case-insensitively by "-2", "-3", ... (see _mesh_stems).
+    - ``folder`` may not hold anything but an earlier export (ValueError, and nothing is touched):
+      it is replaced as a whole.
+    """
     scene = depsgraph.scene
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    target = _target_folder(folder)
+    _check_replaceable(target)
     unit_mm = _unit_mm(scene)
+    plan = _Plan()
+    eye = eye_spec(scene)
+    environment = environment_spec(scene, plan)
+    exported = [obj for obj in scene.objects
+                if obj.type == "MESH" and obj.hud.role != "none" and obj.visible_get()]
+    stems = _mesh_stems(exported)
     objects = []
-    for obj in scene.objects:
-        if obj.type != "MESH" or obj.hud.role == "none" or not obj.visible_get():
-            continue
-        name = obj.name
-        rel = f"meshes/{bpy.path.clean_name(name)}.obj"
-        co, tri, uv = _mesh_arrays(obj, depsgraph, with_uv=any(f.kind == "image" for f in
-                                                              MATERIALS[obj.hud.role].schema.fields))
-        write_obj(folder / rel, co * unit_mm, tri, uv)
-        entry = {"name": name, "mesh": rel, "transform": {"matrix": _matrix_mm(obj, unit_mm)},
-                 "material": material_spec(obj, folder)}
+    for obj in exported:
+        stem = stems[obj.name]
+        rel = plan.add(f"meshes/{stem}.obj", _mesh_writer(obj, depsgraph, unit_mm))
+        entry = {"name": obj.name, "mesh": rel, "transform": {"matrix": _matrix_mm(obj, unit_mm)},
+                 "material": material_spec(obj, plan, stem)}
         if obj.hud.smooth_normals:
             entry["smooth_normals"] = True
         emission = emission_spec(obj)
@@ -201,7 +428,22 @@ def export_scene(depsgraph, folder) -> Path:
         objects.append(entry)
     data = {"format": "hud-scene", "version": 1, "name": scene.name,
             "description": f"exported from Blender {bpy.app.version_string}",
-            "eye": eye_spec(scene), "environment": environment_spec(scene, folder), "objects": objects,
+            "eye": eye, "environment": environment, "objects": objects,
             "methods": methods_spec(scene)}
-    (folder / "scene.json").write_text(json.dumps(data, indent=2) + "\n")
-    return folder
+    text = json.dumps(data, indent=2) + "\n"
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    token = uuid.uuid4().hex
+    staging = target.parent / f".{target.name}.staging-{token}"
+    staging.mkdir()
+    try:
+        plan.write(staging)
+        (staging / "scene.json").write_text(text, encoding="utf-8")
+        _check_staged(staging, target, plan.files)
+        if check is not None:
+            check(staging)
+        _swap_in(staging, target, target.parent / f".{target.name}.backup-{token}")
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return Path(folder)

@@ -55,9 +55,11 @@ class HUD_OT_export_scene(bpy.types.Operator):
             self.report({"ERROR"}, "choose a folder")
             return {"CANCELLED"}
         try:
-            folder = export_scene(context.evaluated_depsgraph_get(), Path(bpy.path.abspath(self.directory)))
-            load_scene(folder)  # the tracer's own validation, so the folder is known to render
-        except Exception as e:  # noqa: BLE001 - any failure is reported to the user, nothing half-written kept
+            # The tracer's own validation runs on the staged folder: one that would not render never
+            # replaces an earlier export.
+            folder = export_scene(context.evaluated_depsgraph_get(), Path(bpy.path.abspath(self.directory)),
+                                  check=load_scene)
+        except Exception as e:  # noqa: BLE001 - any failure is reported to the user; the folder is as it was
             self.report({"ERROR"}, f"HUD export failed: {e}")
             return {"CANCELLED"}
         self.report({"INFO"}, f"HUD scene written to {folder}")

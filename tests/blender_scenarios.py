@@ -4,6 +4,7 @@ before it returns). Run by tests/test_blender_addon.py; prints its result as one
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import sys
@@ -108,6 +109,161 @@ def scenario_roundtrip(out):
     }
     disable(module)
     return expected
+
+
+def _world_vertices_mm(obj) -> list:
+    """The object's vertices in world millimetres (unit scale 1)."""
+    return [list(obj.matrix_world @ v.co * 1000.0) for v in obj.data.vertices]
+
+
+def _float_image(name: str, value: float, w: int = 8, h: int = 4):
+    img = bpy.data.images.new(name, w, h, float_buffer=True)
+    img.pixels.foreach_set([value, value, value, 1.0] * (w * h))
+    return img
+
+
+def scenario_name_collision(out):
+    """Objects whose names clean to the same file name ("m.a", "m_a", "M.A"; LCDs "s.1", "s_1" with
+    different slides) export to one mesh / texture file each."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = 1.0
+    expected = {}
+    for name, add in (("m.a", lambda: bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0.0, 0.3, 0.0))),
+                      ("m_a", lambda: bpy.ops.mesh.primitive_cube_add(size=0.1, location=(0.2, 0.5, 0.1))),
+                      ("M.A", lambda: bpy.ops.mesh.primitive_ico_sphere_add(radius=0.05, location=(-0.2, 0.7, -0.1)))):
+        add()
+        obj = bpy.context.object
+        obj.name = name
+        obj.hud.role = "mirror"
+        expected[name] = {"vertices_mm": _world_vertices_mm(obj)}
+    for name, value, loc in (("s.1", 0.25, (0.0, 1.0, 0.0)), ("s_1", 0.75, (0.3, 1.0, 0.0))):
+        bpy.ops.mesh.primitive_plane_add(size=0.1, location=loc)
+        obj = bpy.context.object
+        obj.name = name
+        obj.hud.role, obj.hud.image, obj.hud.image_encoding = "lcd", _float_image(f"slide {name}", value), "linear"
+        expected[name] = {"vertices_mm": _world_vertices_mm(obj), "slide": value}
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    disable(module)
+    return expected
+
+
+def _file_hashes(folder: Path) -> dict:
+    """SHA-256 of every file under ``folder`` by relative path."""
+    return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def scenario_failed_export(out):
+    """A good export into F, then exports into F that fail (missing HDRI file, LCD without slide, an aim
+    object not chosen, no camera; and a folder holding other files): what each says, and F afterwards."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    export_scene = sys.modules[f"{module}.hud_addon.export"].export_scene
+    out = Path(out)
+    parent = out / "exports"
+    target = parent / "F"
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = 1.0
+    bpy.ops.mesh.primitive_plane_add(size=0.2, location=(0.0, 0.3, 0.0))
+    mirror = bpy.context.object
+    mirror.name, mirror.hud.role = "mirror", "mirror"
+    bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0.0, 0.6, 0.0))
+    lcd = bpy.context.object
+    slide = _float_image("slide", 0.5)
+    lcd.name, lcd.hud.role, lcd.hud.image, lcd.hud.image_encoding = "lcd panel", "lcd", slide, "linear"
+    bpy.ops.mesh.primitive_plane_add(size=0.01, location=(0.0, 0.8, 0.0))
+    led = bpy.context.object
+    led.name, led.hud.role, led.hud.emits, led.hud.emission_luminance = "led", "absorber", True, 1000.0
+    bpy.ops.mesh.primitive_plane_add(size=0.05, location=(0.3, 0.3, 0.0))
+    extra = bpy.context.object
+    extra.name, extra.hud.role = "extra", "absorber"
+    sky_file = out / "sky.exr"
+    made = _float_image("sky source", 0.5, 16, 8)
+    made.filepath_raw, made.file_format = str(sky_file), "OPEN_EXR"
+    made.save()
+    sky = bpy.data.images.load(str(sky_file), check_existing=False)
+    sky.name = "sky"
+    world = scene.world or bpy.data.worlds.new("World")
+    scene.world = world
+    world.hud.kind, world.hud.image, world.hud.calibration, world.hud.value = "hdri", sky, "mean", 500.0
+
+    def depsgraph():
+        return bpy.context.evaluated_depsgraph_get()
+
+    export_scene(depsgraph(), target)
+    good = _file_hashes(target)
+    # Change the geometry and the slide, so that anything the failing exports write shows in F's files.
+    for v in mirror.data.vertices:
+        v.co.x *= 2.0
+    slide.pixels.foreach_set([0.9] * (8 * 4 * 4))
+    attempts = {}
+
+    def attempt(case, folder=target, operator=False):
+        try:
+            if operator:
+                bpy.ops.hud.export_scene(directory=str(folder))
+            else:
+                export_scene(depsgraph(), folder)
+            message = None
+        except Exception as e:  # noqa: BLE001 - the message is what is tested
+            message = f"{type(e).__name__}: {e}"
+        attempts[case] = {"message": message, "hashes": _file_hashes(folder),
+                          "hidden": sorted(n for n in os.listdir(parent) if n.startswith("."))}
+
+    missing = out / "missing" / "sky.exr"
+    sky.filepath = str(missing)
+    attempt("hdri_missing")
+    attempt("hdri_missing_operator", operator=True)
+    sky.filepath = str(sky_file)
+    lcd.hud.image = None
+    attempt("lcd_no_image")
+    lcd.hud.image = slide
+    led.hud.emission_aim, led.hud.emission_aim_object = "OBJECT", None
+    attempt("aim_unset")
+    led.hud.emission_aim = "NONE"
+    # File system failures: a disk that fills while meshes are written; a staging folder that cannot
+    # take F's place (after F was moved aside).
+    export_mod = sys.modules[f"{module}.hud_addon.export"]
+    write_obj, rename = export_mod.write_obj, os.rename
+
+    def write_half(path, *args, **kwargs):
+        Path(path).write_text("v 0 0 0\n")
+        raise OSError(28, "No space left on device", str(path))
+
+    def rename_fails_for_staging(src, dst):
+        if ".staging-" in str(src):
+            raise OSError(13, "Permission denied", str(dst))
+        return rename(src, dst)
+
+    export_mod.write_obj = write_half
+    attempt("disk_full")
+    export_mod.write_obj = write_obj
+    os.rename = rename_fails_for_staging
+    try:
+        attempt("rename_fails")
+    finally:
+        os.rename = rename
+    # The tracer's validation rejects the staged folder (an open dielectric: a plane of glass).
+    extra.hud.role = "dielectric"
+    attempt("tracer_rejects", operator=True)
+    extra.hud.role = "absorber"
+    foreign = parent / "G"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("not an export\n")
+    attempt("foreign_folder", folder=foreign)
+    camera = scene.camera
+    camera_data = camera.data
+    bpy.data.objects.remove(camera)
+    attempt("no_camera")
+    # Put the camera back and drop "extra": the export now replaces F as a whole.
+    camera = bpy.data.objects.new("Camera", camera_data)
+    scene.collection.objects.link(camera)
+    camera.location = (0.0, -1.0, 0.0)
+    scene.camera = camera
+    bpy.data.objects.remove(extra)
+    attempt("after_fix")
+    disable(module)
+    return {"good": good, "attempts": attempts, "missing": str(missing)}
 
 
 class _Pass:

@@ -162,3 +162,67 @@ def test_render_reports_no_light_to_the_user():
     res, _ = scenario("no_light")
     assert res["figures"]["efficiency"] == 0
     assert any("no light path found" in r for r in res["reports"])
+
+
+def _vertex_set(v) -> np.ndarray:
+    """Distinct vertex positions (n, 3) mm, sorted: meshes exported with UVs repeat corner vertices."""
+    return np.unique(np.round(np.asarray(v, dtype=np.float64), 3), axis=0)
+
+
+def test_objects_whose_names_clean_alike_export_their_own_geometry(tmp_path):
+    """"m.a", "m_a" and "M.A" all clean to m_a (case aside): each gets its own mesh file, unique even
+    case-insensitively, and loads with its own vertices; two LCDs "s.1" and "s_1" keep their own slides."""
+    expected, _ = scenario("name_collision", tmp_path)
+    data = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    meshes = {o["name"]: o["mesh"] for o in data["objects"]}
+    assert sorted(meshes) == sorted(expected)
+    assert len({m.casefold() for m in meshes.values()}) == len(meshes), meshes
+    slides = {o["name"]: o["material"]["image"] for o in data["objects"] if o["material"]["type"] == "lcd"}
+    assert len({s.casefold() for s in slides.values()}) == 2, slides
+    assert meshes["m_a"] == "meshes/m_a.obj"  # a name that is already clean keeps it
+    from tracer.scene import load_scene
+
+    sc = load_scene(tmp_path / "scene")
+    for name, e in expected.items():
+        np.testing.assert_allclose(_vertex_set(sc.object(name).vertices), _vertex_set(e["vertices_mm"]), atol=2e-3,
+                                   err_msg=name)
+        if "slide" in e:
+            assert sc.object(name).material.params["image"].mean() == pytest.approx(e["slide"], abs=1e-6), name
+
+
+def test_a_failed_export_leaves_the_earlier_export_as_it_was(tmp_path):
+    """Export into F, then fail eight ways (HDRI file missing, LCD without slide, aim object not
+    chosen, no camera; a write error while staging, the staged folder failing to take F's place, the
+    tracer's validation rejecting the staged folder): each says what is wrong and where, F is byte for
+    byte the earlier export, and no hidden staging or backup folder is left beside it. A folder
+    holding other files is not replaced. Once fixed, the export replaces F as a whole (the dropped
+    object's mesh is gone)."""
+    res, _ = scenario("failed_export", tmp_path)
+    good, attempts = res["good"], res["attempts"]
+    assert {"scene.json", "meshes/mirror.obj", "meshes/extra.obj"} <= set(good)
+    assert any(k.startswith("textures/") for k in good) and len(good) >= 7
+    expect = {"hdri_missing": ["World", "HDRI image 'sky'", res["missing"], "file not found"],
+              "hdri_missing_operator": ["HUD export failed", "HDRI image 'sky'", res["missing"]],
+              "lcd_no_image": ["'lcd panel'", "Slide", "choose an image"],
+              "aim_unset": ["'led'", "aim"],
+              "no_camera": ["camera"],
+              "disk_full": ["No space left on device"],
+              "rename_fails": ["Permission denied"],
+              "tracer_rejects": ["HUD export failed", "extra", "closed"]}
+    for case, words in expect.items():
+        a = attempts[case]
+        assert a["message"] is not None, case
+        for w in words:
+            assert w in a["message"], (case, w, a["message"])
+        assert a["hashes"] == good, case
+        assert a["hidden"] == [], (case, a["hidden"])
+    foreign = attempts["foreign_folder"]
+    assert foreign["message"] is not None and "notes.txt" in foreign["message"]
+    assert list(foreign["hashes"]) == ["notes.txt"] and foreign["hidden"] == []
+    fixed = attempts["after_fix"]
+    assert fixed["message"] is None and fixed["hidden"] == []
+    assert "meshes/extra.obj" not in fixed["hashes"]
+    assert fixed["hashes"]["meshes/mirror.obj"] != good["meshes/mirror.obj"]
+    from tracer.scene import load_scene
+
+    assert load_scene(tmp_path / "exports" / "F").object("mirror").vertices.shape[0] == 4
