@@ -14,6 +14,15 @@ luminance: the brightness theorem (luminance is conserved along a lossless specu
 Each distinct chain (the sequence of objects and events) is one *path*; in a HUD the dominant path
 is the symbol image (windshield reflection, mirror, LCD, the scatterer behind it) and the chain
 that refracts into the windshield and reflects at its outer surface is the ghost image.
+
+The chief ray alone predicts a pixel only where what it ends on fills the pupil as seen back through
+the chain. Where optics image a small source into the pupil (a Maxwellian view: a condenser, a
+concave mirror) only part of the pupil sees it, so :func:`specular_paths` can also follow rays from
+stratified points over the whole pupil and average them (the pixel's luminance is the pupil average
+of the luminance its rays see, paper eq. 2). What the analysis cannot follow it reports: a
+scattering surface whose direct view of a light is blocked by a specular surface (a condenser lens,
+a mirror) is lit through optics the quadrature does not trace, so its prediction is a lower bound
+(``through_specular`` of the leaves, and ``ChiefRays.specular_blockers``).
 """
 
 from __future__ import annotations
@@ -25,9 +34,9 @@ import numpy as np
 
 from .film import Splats
 from .integrators.path import Context, PathMethod, PathState, Roulette, Timers, segment_to, trace
-from .optics.bsdf import RADIANCE
+from .optics.bsdf import DELTA, RADIANCE
 from .optics.materials import LCD
-from .sampling import make_rng
+from .sampling import make_rng, uniform_disk_concentric
 from .units import luminance3
 from .vec import F32, dot, norm
 
@@ -43,9 +52,14 @@ class ChiefRays(PathMethod):
 
     mode = RADIANCE
 
-    def __init__(self, world, level: int = 4):
+    def __init__(self, world, level: int = 4, environment: bool = True):
         self.world = world
+        self.environment = environment
         self.quad = world.lights.quadrature(level) if len(world.lights) else None
+        #: Scattering object name -> names of the specular objects that block its direct view of a light.
+        self.specular_blockers: dict[str, set[str]] = defaultdict(set)
+        delta = np.array([bool(m.flags & DELTA) for m in world.materials] + [False])  # absorbers cast shadows
+        self._delta_face = delta[world.face_material] if world.accel is not None else np.zeros(0, bool)
         self.max_lum = world.max_luminance
         self.names = {0: ()}
         self.codes: dict[tuple, int] = {(): 0}
@@ -71,16 +85,20 @@ class ChiefRays(PathMethod):
         uniq, inverse = np.unique(slots, return_inverse=True)
         return [objs[s].name + suffix for s in uniq.tolist()], inverse.reshape(-1)
 
-    def _leaf(self, state: PathState, labels: list[str], which: np.ndarray | None, value: np.ndarray):
+    def _leaf(self, state: PathState, labels: list[str], which: np.ndarray | None, value: np.ndarray,
+              through_specular: np.ndarray | None = None):
         codes = self._code(state.extra["sig"], labels, which)
         factor = luminance3(state.beta)
+        if through_specular is None:
+            through_specular = np.zeros(len(state))
         for c in np.unique(codes):
             k = codes == c
-            self.leaves[int(c)].append((state.owner[k], value[:, k].T, factor[k], state.extra["lcd"][k]))
+            self.leaves[int(c)].append((state.owner[k], value[:, k].T, factor[k], state.extra["lcd"][k],
+                                        through_specular[k]))
 
     def escaped(self, state, ctx):
         env = self.world.environment
-        if not env.is_black:
+        if self.environment and not env.is_black:
             self._leaf(state, ["environment"], None, state.beta * env.radiance(state.d))
 
     def emitted(self, state, tri, p, t, ctx):
@@ -90,9 +108,12 @@ class ChiefRays(PathMethod):
     def connect(self, state, it, bsdf, ctx):
         """A scattering surface ends the chain: its luminance toward the eye from the lights in direct
         view, the sum over quadrature points of f L_e cos_i cos_e / d^2 dA, with one shadow-ray call
-        per chunk of point pairs."""
+        per chunk of point pairs. Where the first thing between the surface and a light point is a
+        specular surface, the light that point would give unblocked is tallied (Y, cd/m^2, times the
+        chain's factor) as ``through_specular``, and the blocker is named in ``specular_blockers``."""
         m = len(state)
         out = np.zeros((3, m))
+        through = np.zeros(m)
         if self.quad is not None:
             qp, qn, qw, ql, q2 = self.quad
             accel = self.world.accel
@@ -106,14 +127,27 @@ class ChiefRays(PathMethod):
                 dist = norm(v)
                 w = (v / dist).astype(F32)  # toward the light point
                 cos_e = -dot(w, np.take(qn, kk, axis=1))
-                blocked = accel.occluded(*segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1),
-                                                     it.offset[ii]))
+                o, d, tmax = segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1), it.offset[ii])
+                blocked = accel.occluded(o, d, tmax)
                 sub = it.take(ii)
                 f = bsdf.eval(sub, w, RADIANCE)
-                g = np.where(((cos_e > 0) | q2[kk]) & ~blocked, np.abs(cos_e) * qw[kk] / (dist * dist), 0.0)
+                g = np.where((cos_e > 0) | q2[kk], np.abs(cos_e) * qw[kk] / (dist * dist), 0.0)
                 contrib = f * np.take(ql, kk, axis=1) * g
+                lost = np.flatnonzero(blocked & (luminance3(contrib) > 0))
+                if len(lost):
+                    face = accel.intersect(np.take(o, lost, axis=1), np.take(d, lost, axis=1)).face
+                    spec = face >= 0
+                    spec[spec] = self._delta_face[face[spec]]
+                    if spec.any():
+                        lost, face = lost[spec], face[spec]
+                        np.add.at(through, ii[lost], luminance3(np.take(contrib, lost, axis=1)))
+                        objs = self.world.scene.objects
+                        blockers = {objs[b].name for b in np.unique(accel.face_slot[face]).tolist()}
+                        for s_ in np.unique(it.slot[ii[lost]]).tolist():
+                            self.specular_blockers[objs[s_].name] |= blockers
+                contrib[:, blocked] = 0.0
                 out += contrib.reshape(3, m, len(k)).sum(axis=2)
-        self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out)
+        self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, luminance3(state.beta) * through)
         return None
 
     def spare(self, bsdf, hits):
@@ -144,17 +178,28 @@ class ChiefRays(PathMethod):
         return out
 
 
-def specular_paths(world, stride: int | None = None, max_depth: int = 12, directions: np.ndarray | None = None):
+def specular_paths(world, stride: int | None = None, max_depth: int = 12, directions: np.ndarray | None = None,
+                   pixels: np.ndarray | None = None, pupil_grid: int = 0, environment: bool = True, seed: int = 0):
     """Follow chief rays of a pixel grid (or along given world ``directions`` (p, 3) from the pupil
-    centre) through all specular branches.
+    centre, or of the given flat ``pixels``) through all specular branches.
+
+    With ``pupil_grid`` n > 0 every pixel is followed from n x n pupil points instead of the centre
+    (stratified over the pupil disk, jittered by ``seed``), and each ray's luminance is divided by
+    n^2, so that the sum over a pixel's rays is the pupil average: the pixel's luminance where its
+    rays see different things (paper eq. 2). ``environment`` False leaves the environment out (for
+    methods that do not render it).
 
     Returns a dict with ``pixels`` (p,) flat indices analysed (or 0..p-1 for given directions),
-    ``stride``, ``grid`` and ``paths``: a list of {"path": str, "pixel" (k,) positions into
-    ``pixels``, "luminance" (k, 3) predicted cd/m^2, "factor" (k,) Y of the product of R and T,
-    "lcd" (k,) the first LCD's transmittance relative to a clear cell, NaN if none}.
+    ``stride``, ``grid``, ``pupil_samples`` (n^2, or 1 for chief rays), ``specular_blockers``
+    (scattering object -> specular objects blocking its view of a light) and ``paths``: a list of
+    {"path": str, "pixel" (k,) positions into ``pixels``, "luminance" (k, 3) predicted cd/m^2,
+    "factor" (k,) Y of the product of R and T, "lcd" (k,) the first LCD's transmittance relative to
+    a clear cell, NaN if none, "through_specular" (k,) Y cd/m^2 a scattering leaf would add were its
+    specular blockers clear}.
     """
     eye = world.eye
     w, h = eye.width, eye.height
+    lens = None
     if directions is not None:
         stride, jj = 1, np.zeros((1, len(directions)))
         pixels = np.arange(len(directions))
@@ -162,14 +207,26 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         d = d / norm(d)
         o = np.repeat(eye.position.reshape(3, 1), d.shape[1], axis=1)
     else:
-        if stride is None:
-            stride = max(1, math.ceil(math.sqrt(w * h / 40000)))
-        jj, ii = np.meshgrid(np.arange(stride // 2, h, stride), np.arange(stride // 2, w, stride), indexing="ij")
-        pixels = (jj * w + ii).ravel()
+        if pixels is None:
+            if stride is None:
+                stride = max(1, math.ceil(math.sqrt(w * h / 40000)))
+            jj, ii = np.meshgrid(np.arange(stride // 2, h, stride), np.arange(stride // 2, w, stride), indexing="ij")
+            pixels = (jj * w + ii).ravel()
+        else:
+            pixels = np.asarray(pixels, dtype=np.int64)
+            jj = np.zeros((1, len(pixels)))
         sx, sy = eye.pixel_centers()
-        o, d, _ = eye.generate_rays(sx[pixels % w], sy[pixels // w], np.zeros((2, len(pixels))))
-    n = len(pixels)
-    method = ChiefRays(world)
+        px = pixels
+        if pupil_grid > 0:
+            n2 = pupil_grid * pupil_grid
+            px = np.repeat(pixels, n2)
+            cell = np.tile(np.arange(n2), len(pixels))
+            u = (np.stack([cell % pupil_grid, cell // pupil_grid]) + make_rng(seed).random((2, len(px)))) / pupil_grid
+            lens = uniform_disk_concentric(u) * eye.pupil_radius
+        o, d, _ = eye.generate_rays(sx[px % w], sy[px // w], lens if lens is not None else np.zeros((2, len(px))))
+    samples = pupil_grid * pupil_grid if lens is not None else 1
+    n = d.shape[1]
+    method = ChiefRays(world, environment=environment)
     state = PathState(o, d.astype(F32), np.ones((3, n), F32), np.arange(n), np.zeros(n, np.int64), np.zeros(n, F32),
                       np.ones(n, bool),
                       {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)})
@@ -177,10 +234,13 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     trace(method, state, ctx, max_depth)
     paths = []
     for s, parts in method.leaves.items():
-        own = np.concatenate([p[0] for p in parts])
-        lum = np.concatenate([p[1] for p in parts])
+        own = np.concatenate([p[0] for p in parts]) // samples
+        lum = np.concatenate([p[1] for p in parts]) / samples
         fac = np.concatenate([p[2] for p in parts])
         lc = np.concatenate([p[3] for p in parts])
-        paths.append({"path": " > ".join(method.names[s]), "pixel": own, "luminance": lum, "factor": fac, "lcd": lc})
+        thr = np.concatenate([p[4] for p in parts]) / samples
+        paths.append({"path": " > ".join(method.names[s]), "pixel": own, "luminance": lum, "factor": fac, "lcd": lc,
+                      "through_specular": thr})
     paths.sort(key=lambda p: -float(luminance3(p["luminance"].T).sum()))
-    return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths}
+    return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths, "pupil_samples": samples,
+            "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()}}

@@ -58,26 +58,71 @@ def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]
     return arg
 
 
-def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray) -> dict:
+#: The pupil-integrated prediction: n x n stratified pupil points per pixel, on at most this many
+#: evenly spaced pixels of each section.
+PUPIL_GRID = 6
+PUPIL_PIXELS = 128
+#: A section's prediction is not comparable with the render when the light its scattering surfaces
+#: receive through specular surfaces (not followed by the analysis) would add more than this share.
+SPECULAR_SHARE = 0.01
+#: Pupil fill (pupil-integrated over chief-ray prediction) outside 1 +- this is reported in the notes.
+FILL_NOTE = 0.05
+#: Paths named in a section's breakdown; the rest are summed as "other paths".
+BREAKDOWN_PATHS = 3
+
+
+def _per_pixel(paths: list[dict], n: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """(total Y (n,), Y per path [(n,)], through-specular Y (n,)) summed per analysed pixel, cd/m^2."""
+    total, through, per_path = np.zeros(n), np.zeros(n), []
+    for p in paths:
+        y = np.zeros(n)
+        np.add.at(y, p["pixel"], luminance(p["luminance"]))
+        np.add.at(through, p["pixel"], p["through_specular"])
+        total += y
+        per_path.append(y)
+    return total, per_path, through
+
+
+def _evenly(idx: np.ndarray, k: int) -> np.ndarray:
+    """At most ``k`` entries of ``idx`` evenly spaced through it."""
+    if len(idx) <= k:
+        return idx
+    return idx[np.unique(np.linspace(0, len(idx) - 1, k).round().astype(np.int64))]
+
+
+def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.analysis`.
 
-    Masks come from the dominant chain: "symbol" where its LCD cell is clear, "background" where
-    it is black (both eroded by one grid cell, so edges blurred by the pupil are left out).
+    Sections come from the chief rays' dominant chain: "symbol" where its LCD cell is clear,
+    "background" where it is black, or "image" (every pixel the chain reaches) where it has no LCD;
+    all eroded by one grid cell, so edges blurred by the pupil are left out. Up to PUPIL_PIXELS
+    evenly spaced pixels of each section are compared (``pixels``; the section has
+    ``section_pixels``): the rendered mean over them against a prediction that follows each of them
+    from PUPIL_GRID^2 points over the pupil
+    (``predicted_cd_m2``; the chief ray's alone is ``predicted_chief_ray_cd_m2``, their ratio
+    ``pupil_fill``), and its breakdown by path sums to it ("other paths" included). ``environment``
+    False (a method that does not render it) leaves the environment out of the prediction.
+
+    A section is compared (``rendered_over_predicted``) only where the analysis' assumptions hold;
+    otherwise ``valid`` is false and ``not_comparable`` says why: today, a scattering surface lit
+    through specular surfaces (a condenser lens) whose light the analysis does not follow.
     """
-    res = specular_paths(world)
+    res = specular_paths(world, environment=environment)
     grid_h, grid_w = res["grid"]
     pixels = res["pixels"]
     npts = len(pixels)
-    total = np.zeros(npts)
-    per_path = []
-    for p in res["paths"]:
-        y = luminance(p["luminance"])
-        np.add.at(total, p["pixel"], y)
-        per_path.append(y)
+    total, per_path, _ = _per_pixel(res["paths"], npts)
     out: dict = {
-        "method": "chief ray through every specular branch; scattering surfaces lit directly by the emitters "
-                  "(deterministic quadrature); luminance = product of R and T along the chain x luminance behind it",
+        "method": "every specular branch followed from the pupil (chief rays for the path list; "
+                  f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
+                  "directly by the emitters (deterministic quadrature); luminance = product of R and T along the "
+                  "chain x luminance behind it" + ("" if environment else "; the environment left out, as the method "
+                                                   "does not render it"),
+        "assumptions": "light reaches scattering surfaces directly from the emitters, not through specular optics",
         "grid_stride_px": res["stride"],
+        "valid": True,
+        "not_comparable": [],
+        "notes": [],
         "paths": [],
     }
     y_img = image_y.reshape(-1)
@@ -86,47 +131,82 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray) -> 
         out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / npts),
                              "predicted_mean_cd_m2": float(y.mean()),
                              "transfer_factor_mean": float(p["factor"].mean())})
-    lcd_paths = [(p, y) for p, y in zip(res["paths"], per_path, strict=True) if np.any(np.isfinite(p["lcd"]))]
-    if not lcd_paths:
+    if len(res["paths"]) > 8:
+        out["paths"].append({"path": "other paths", "predicted_mean_cd_m2": float(sum(y.mean() for y in per_path[8:]))})
+    if not res["paths"]:
         return out
-    main, main_y = lcd_paths[0]
-    grid_lcd = np.full(npts, np.nan)
-    grid_lcd[main["pixel"]] = main["lcd"]
-    grid_lcd = grid_lcd.reshape(grid_h, grid_w)
-    symbol = _erode(grid_lcd >= 0.5)
-    # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
-    # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
-    background = grid_lcd < 0.5
-    for p, _ in lcd_paths[1:2]:
-        other = np.full(npts, np.nan)
-        other[p["pixel"]] = p["lcd"]
-        background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
-    background = _erode(background)
-    cr = next(o.material.params["contrast_ratio"] for o in world.scene.objects if o.material.type == "lcd")
-    sections = {}
-    for key, mask in (("symbol", symbol), ("background", background)):
+    lcd_paths = [p for p in res["paths"] if np.any(np.isfinite(p["lcd"]))]
+    masks = {}
+    grid_lcd = None
+    if lcd_paths:
+        main = lcd_paths[0]
+        grid_lcd = np.full(npts, np.nan)
+        grid_lcd[main["pixel"]] = main["lcd"]
+        grid_lcd = grid_lcd.reshape(grid_h, grid_w)
+        masks["symbol"] = _erode(grid_lcd >= 0.5)
+        # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
+        # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
+        background = grid_lcd < 0.5
+        for p in lcd_paths[1:2]:
+            other = np.full(npts, np.nan)
+            other[p["pixel"]] = p["lcd"]
+            background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
+        masks["background"] = _erode(background)
+    else:
+        reached = np.zeros(npts, bool)
+        reached[res["paths"][0]["pixel"]] = True
+        masks["image"] = _erode(reached.reshape(grid_h, grid_w))
+        out["image_path"] = res["paths"][0]["path"]
+    blockers = dict(res["specular_blockers"])
+    for key, mask in masks.items():
         idx = np.nonzero(mask.ravel())[0]
         if len(idx) == 0:
             continue
-        entry = _mask_stats(y_img, v_img, pixels[idx])
-        entry["predicted_cd_m2"] = float(total[idx].mean())
-        contrib = {}
-        for p, y in lcd_paths[:3]:
-            grid = np.zeros(npts)
-            np.add.at(grid, p["pixel"], y)
-            contrib[p["path"]] = float(grid[idx].mean())
-        entry["predicted_by_path_cd_m2"] = contrib
-        pred = entry["predicted_cd_m2"]
-        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / pred if pred > 0 else None
-        sections[key] = entry
-    out.update(sections)
-    out["lcd_contrast_ratio"] = cr
-    if "symbol" in sections and "background" in sections:
-        out["symbol_over_contrast_ratio_cd_m2"] = sections["symbol"]["rendered_cd_m2"] / cr
-        out["rendered_contrast"] = (sections["symbol"]["rendered_cd_m2"] / sections["background"]["rendered_cd_m2"]
-                                    if sections["background"]["rendered_cd_m2"] > 0 else None)
+        sel = _evenly(idx, PUPIL_PIXELS)
+        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment)
+        for k, v in pup["specular_blockers"].items():
+            blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
+        p_total, p_per_path, p_through = _per_pixel(pup["paths"], len(sel))
+        entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
+        entry["section_pixels"] = int(len(idx))
+        pred = float(p_total.mean())
+        chief = float(total[sel].mean())
+        entry["predicted_cd_m2"] = pred
+        entry["predicted_chief_ray_cd_m2"] = chief
+        entry["pupil_fill"] = pred / chief if chief > 0 else None
+        named = {p["path"]: float(y.mean()) for p, y in zip(pup["paths"][:BREAKDOWN_PATHS],
+                                                            p_per_path[:BREAKDOWN_PATHS], strict=True)}
+        if len(pup["paths"]) > BREAKDOWN_PATHS:
+            named["other paths"] = float(sum(y.mean() for y in p_per_path[BREAKDOWN_PATHS:]))
+        entry["predicted_by_path_cd_m2"] = named
+        through = float(p_through.mean())
+        entry["through_specular_cd_m2"] = through
+        reasons = []
+        if through > SPECULAR_SHARE * (pred + through):
+            lit = ", ".join(f"{s} (through {', '.join(b)})" for s, b in sorted(blockers.items()))
+            reasons.append(f"{key}: scattering surfaces are lit through specular optics the analysis does not follow: "
+                           f"{lit}; direct light would add {through:.4g} cd/m^2 to the {pred:.4g} predicted, so the "
+                           "prediction is a lower bound")
+        if entry["pupil_fill"] is not None and abs(entry["pupil_fill"] - 1) > FILL_NOTE:
+            out["notes"].append(f"{key}: what the chief ray sees fills {100 * entry['pupil_fill']:.3g} % of the pupil "
+                                f"as seen through the optics: the chief ray alone would predict {chief:.4g} cd/m^2, "
+                                f"the pupil average is {pred:.4g}")
+        entry["valid"] = not reasons
+        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / pred if pred > 0 and not reasons else None
+        out["not_comparable"] += reasons
+        out[key] = entry
+    out["valid"] = not out["not_comparable"]
+    if lcd_paths:
+        out["lcd_contrast_ratio"] = next(o.material.params["contrast_ratio"] for o in world.scene.objects
+                                         if o.material.type == "lcd")
+        if "symbol" in out and "background" in out:
+            out["symbol_over_contrast_ratio_cd_m2"] = out["symbol"]["rendered_cd_m2"] / out["lcd_contrast_ratio"]
+            out["rendered_contrast"] = (out["symbol"]["rendered_cd_m2"] / out["background"]["rendered_cd_m2"]
+                                        if out["background"]["rendered_cd_m2"] > 0 else None)
     if len(lcd_paths) > 1:
-        ghost, ghost_y = lcd_paths[1]
+        main, ghost = lcd_paths[0], lcd_paths[1]
+        main_y = luminance(main["luminance"])
+        ghost_y = luminance(ghost["luminance"])
         g_lcd = np.full(npts, np.nan)
         g_lcd[ghost["pixel"]] = ghost["lcd"]
         g_open = (g_lcd >= 0.5).reshape(grid_h, grid_w)
@@ -180,6 +260,8 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         warnings.append(f"the image is dominated by noise: the median relative standard error of lit pixels is "
                         f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time"
                         f"{INTEGRATORS[result.method].noise_advice if result.method in INTEGRATORS else ''}")
+    if analysis is not None:
+        warnings += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
     return {
         "tracer": f"hud-tracer {__version__}",
         "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
@@ -303,7 +385,7 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         preview, info = tonemap_ward(image, adaptation_luminance(y))
         analysis = None
         if analyse and world.accel is not None and not result.partial:
-            analysis = brightness_theorem(world, y, var_y)
+            analysis = brightness_theorem(world, y, var_y, INTEGRATORS[method].renders_environment)
         report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
         run_id = uuid.uuid4().hex
         report = {"run_id": run_id} | report

@@ -154,6 +154,9 @@ class Integrator:
     efficiency_definition = ""
     #: The end of the noise warning: when another method would suit the scene better (", or ...").
     noise_advice = ""
+    #: Whether the method's image includes light from the environment (the brightness-theorem
+    #: analysis predicts only what the method renders).
+    renders_environment = True
 
     def __init__(self, world, seed: int, batch_size: int | None = None, options: dict | None = None):
         if not isinstance(world, World):

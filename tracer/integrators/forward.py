@@ -32,6 +32,7 @@ class ForwardTracer(Integrator, PathMethod):
     name = "forward"
     noise_advice = (", or use the backward method, whose next-event estimation suits sources that a scattering "
                     "surface sees directly")
+    renders_environment = False
     summary = "sources -> optics -> pupil -> retina (paper sec. 2, directed split)"
     options = (MAX_DEPTH,)
     components = {"light": "particles emitted"}
