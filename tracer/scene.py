@@ -463,6 +463,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         For any problem, naming the file and the field.
     """
     path = Path(path)
+    fname = str(path)
     try:
         root = path.parent if path.is_file() else path
         file = root / SCENE_FILE
@@ -471,7 +472,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             raise SceneError(fname, "", "scene file not found (a scene is a folder with scene.json)")
         raw_bytes = file.read_bytes()
     except OSError as e:
-        raise SceneError(str(path), "", f"cannot be read ({e.strerror or e})") from None
+        raise SceneError(fname, "", f"cannot be read ({e.strerror or e})") from None
     try:
         text = raw_bytes.decode("utf-8")
     except UnicodeDecodeError as e:
