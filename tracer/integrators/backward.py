@@ -76,6 +76,19 @@ EXIT_PUPIL = Field(
     alternatives=(("object",), ("center_mm", "radius_mm")))
 
 
+#: The largest density (1/sr) the MIS weights use: its square stays finite in float64.
+MAX_PDF = 1e150
+
+
+def solid_angle_pdf(pdf_area: np.ndarray, dist: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """An area density (1/mm^2) at distance ``dist`` (mm) seen at |cos| to the surface normal, per
+    steradian: pdf dist^2 / |cos|, in float64; infinite where the cosine is 0 (seen edge-on)."""
+    cos = np.abs(np.asarray(cos, np.float64))
+    num = np.asarray(pdf_area, np.float64) * np.asarray(dist, np.float64) ** 2
+    out = np.full(np.broadcast(num, cos).shape, np.inf)
+    return np.divide(num, cos, out=out, where=cos > 0)
+
+
 @register
 class BackwardTracer(Integrator, PathMethod):
     name = "backward"
@@ -228,8 +241,11 @@ class BackwardTracer(Integrator, PathMethod):
 
     @staticmethod
     def _power_heuristic(p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
-        """p_a^2 / (p_a^2 + p_b^2), in float64 (squared densities of small sources exceed float32)."""
-        p_a, p_b = np.asarray(p_a, np.float64), np.asarray(p_b, np.float64)
+        """p_a^2 / (p_a^2 + p_b^2), in float64 (squared densities of small sources exceed float32).
+        Densities are capped at MAX_PDF, so that an infinite one (a light seen edge-on) weighs 1
+        against any finite other and no square overflows."""
+        p_a = np.minimum(np.asarray(p_a, np.float64), MAX_PDF)
+        p_b = np.minimum(np.asarray(p_b, np.float64), MAX_PDF)
         a2, b2 = p_a * p_a, p_b * p_b
         s = a2 + b2
         return np.where(s > 0, a2 / np.where(s > 0, s, 1.0), 0.0)
@@ -246,7 +262,7 @@ class BackwardTracer(Integrator, PathMethod):
         value = state.beta * self.lights.emitted(tri, state.d)
         if self.nee_lights:
             cos_y = np.abs(dot(state.d, np.take(self.lights.tris.normal, tri, axis=1)))
-            p_light = self.lights.pdf_power_area(tri) * t * t / np.maximum(cos_y, 1e-300)
+            p_light = solid_angle_pdf(self.lights.pdf_power_area(tri), t, cos_y)
             value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, p_light))
         self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
 
@@ -264,7 +280,7 @@ class BackwardTracer(Integrator, PathMethod):
             tri, y, pdf_area = lights.sample_direct(it.p, rng.random((3, m)), imp)
             w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
             f = bsdf.eval(it, w, RADIANCE)
-            p_light = lights.pdf_power_area(tri) * dist * dist / np.maximum(cos_y, 1e-300)
+            p_light = solid_angle_pdf(lights.pdf_power_area(tri), dist, cos_y)
             mis = self._power_heuristic(p_light, bsdf.pdf(it, w))
             g = cos_y / np.maximum(dist * dist * pdf_area, 1e-300)
             value = state.beta * f * radiance * (g * mis)
