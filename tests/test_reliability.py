@@ -280,6 +280,7 @@ BAD_ARGS = {
     "--seed 2^64": (("--seed", 2**64), "--seed"),
     "--batch-size -1": (("--batch-size", -1), "--batch-size"),
     "--batch-size 0": (("--batch-size", 0), "--batch-size"),
+    "--batch-size 1": (("--batch-size", 1), "--batch-size"),
     "--batch-size 1e12": (("--batch-size", 10**12), "--batch-size"),
     "--workers 0": (("--workers", 0), "--workers"),
     "--workers -3": (("--workers", -3), "--workers"),

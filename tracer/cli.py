@@ -61,7 +61,9 @@ class ProgressBar:
 
 class StopFlag:
     """The first stop signal asks the render to stop after the batches being merged and to write a
-    partial result; a second one aborts (KeyboardInterrupt: nothing is written)."""
+    partial result; a second one aborts (KeyboardInterrupt: nothing is written), unless the outputs
+    are already being written: that takes a fraction of a second and is let finish, so that the set
+    is whole."""
 
     def __init__(self):
         self.stop = False
@@ -70,10 +72,15 @@ class StopFlag:
         return self.stop
 
     def handler(self, signum, frame):
+        from .outputs import writing
+
+        name = signal.Signals(signum).name
+        if self.stop and writing():
+            sys.stderr.write(f"\n{name}: the partial result is being written and will be complete in a moment\n")
+            return
         if self.stop:
             raise KeyboardInterrupt
         self.stop = True
-        name = signal.Signals(signum).name
         sys.stderr.write(f"\n{name}: stopping and writing a partial result (Ctrl-C again to abort)\n")
 
 
@@ -83,7 +90,7 @@ class ArgumentError(Exception):
 
 def check_render_args(args):
     """Every render argument in its range, before anything is loaded or traced."""
-    from .integrators.base import MAX_BATCH
+    from .integrators.base import MAX_BATCH, SMALLEST_BATCH
 
     def bad(flag, msg):
         raise ArgumentError(f"{flag}: {msg}")
@@ -94,8 +101,8 @@ def check_render_args(args):
         bad("--seconds", f"must be a finite number in (0, {MAX_SECONDS:.0e}], got {args.seconds}")
     if not 0 <= args.seed < 2**63:
         bad("--seed", f"must lie in [0, 2^63), got {args.seed}")
-    if args.batch_size is not None and not 1 <= args.batch_size <= MAX_BATCH:
-        bad("--batch-size", f"must lie in [1, {MAX_BATCH}], got {args.batch_size}")
+    if args.batch_size is not None and not SMALLEST_BATCH <= args.batch_size <= MAX_BATCH:
+        bad("--batch-size", f"must lie in [{SMALLEST_BATCH}, {MAX_BATCH}], got {args.batch_size}")
     if not 1 <= args.workers <= MAX_WORKERS:
         bad("--workers", f"must lie in [1, {MAX_WORKERS}], got {args.workers}")
 
@@ -200,10 +207,17 @@ def cmd_methods(args) -> int:
     return 0
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .integrators import DEFAULT_METHOD, INTEGRATORS
 
-    ap = argparse.ArgumentParser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
+    ap = Parser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a preset or a scene folder")
     r.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
@@ -214,7 +228,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--out", required=True, help="output folder (image.exr, preview.png, report.json)")
-    r.add_argument("--batch-size", type=int, default=None, help="rays per batch (default 131072)")
+    r.add_argument("--batch-size", type=int, default=None,
+                   help="paths per batch, 1024 to 2^24 (default: 131072 with --rays; with --seconds sized so that a "
+                        "batch takes about 2 %% of the budget)")
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="processes (default: one per core); with --rays the image does not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -41,6 +41,15 @@ except ImportError:  # pragma: no cover - Windows
 #: by the next render that holds the lock).
 STAGING_PREFIX = ".hud-staging-"
 
+_writing = False
+
+
+def writing() -> bool:
+    """Whether an :meth:`OutputSet.commit` is under way in this process: an interrupt handler must
+    then let it finish (it takes a fraction of a second) rather than raise into the middle of the
+    swap, which would leave a mixed set, or of a C library's write, which prints its own error."""
+    return _writing
+
 
 class OutputError(TracerError):
     """An output folder or file problem; ``path`` is the folder or file at fault."""
@@ -142,7 +151,9 @@ class OutputSet:
         """Write, check and move ``files`` into the folder as one set (see the module docstring)."""
         if sorted(f.name for f in files) != sorted(self.names):
             raise ValueError(f"an output set is {self.names}, got {[f.name for f in files]}")
+        global _writing
         staging = self.folder / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
+        _writing = True
         try:
             try:
                 staging.mkdir()
@@ -160,6 +171,7 @@ class OutputSet:
             self._swap(staging, [f.name for f in files])
         finally:
             shutil.rmtree(staging, ignore_errors=True)
+            _writing = False
 
     def _swap(self, staging: Path, names: list[str]):
         """Move the staged files onto the targets; on failure put back what was there."""
