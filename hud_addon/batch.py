@@ -5,9 +5,12 @@
 The add-on is enabled from this source tree through a temporary local extension repository (Blender
 disables it at exit, so the bpy module does not hang), the file is opened, its HUD settings are
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
-DIR receives image.exr (multilayer: Combined and the luminance pass Y, cd/m^2) and report.json.
-This module imports nothing from the package at import time (main() takes the tracer's allocator
-settings) and runs as a top-level script.
+DIR receives image.exr (multilayer: Combined and the luminance pass Y, cd/m^2) and report.json,
+written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
+and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
+the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
+kept). The report's ``run_id`` names the set. This module imports nothing from the package at import
+time (main() takes the tracer's allocator settings) and runs as a top-level script.
 
 With a real Blender and the extension installed:
     blender --background FILE.blend -E HUD_TRACER -o //render/image -F OPEN_EXR_MULTILAYER -f 1
@@ -57,10 +60,37 @@ def main(argv: list[str] | None = None) -> int:
     group.add_argument("--rays", type=int)
     ap.add_argument("--seed", type=int)
     args = ap.parse_args(argv)
+    from tracer.cli import ArgumentError, check_render_args
+    from tracer.outputs import OutputFolderError, OutputSet
+
     blend = Path(args.blend).resolve()
     if not blend.is_file():
         print(f"error: {blend}: no such .blend file", file=sys.stderr)
         return 2
+    try:
+        check_render_args(argparse.Namespace(rays=args.rays, seconds=args.seconds, seed=args.seed or 0,
+                                             batch_size=None, workers=1))
+        outputs = OutputSet(Path(args.out).resolve(), ("image.exr", "report.json")).open()
+    except (ArgumentError, OutputFolderError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    try:
+        return _render(args, blend, outputs)
+    finally:
+        outputs.close()
+
+
+def _render(args, blend: Path, outputs) -> int:
+    """Open ``blend``, render it with Blender's pipeline into a temporary folder and commit the
+    image and the report to ``outputs`` (a locked :class:`tracer.outputs.OutputSet`)."""
+    import uuid
+
+    import numpy as np
+
+    from tracer.imageio import read_exr_channels
+    from tracer.outputs import OutputFile, OutputWriteError
+    from tracer.render import finite_json
+
     tmp = Path(tempfile.mkdtemp(prefix="hud-render-"))
     atexit.register(shutil.rmtree, tmp, ignore_errors=True)
     os.environ.setdefault("BLENDER_USER_RESOURCES", str(tmp / "user"))
@@ -78,25 +108,41 @@ def main(argv: list[str] | None = None) -> int:
         scene.hud.budget, scene.hud.rays = "RAYS", args.rays
     if args.seed is not None:
         scene.hud.seed = args.seed
-    out = Path(args.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
     settings = scene.render.image_settings
     settings.file_format = "OPEN_EXR_MULTILAYER"
     settings.color_depth = "32"
-    scene.render.filepath = str(out / "image.exr")
+    rendered = tmp / "render" / "image.exr"
+    scene.render.filepath = str(rendered)
     scene.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
     figures = dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
-    figures["blend"] = str(blend)
-    (out / "report.json").write_text(json.dumps(figures, indent=2) + "\n")
     for w in figures.get("warnings", []):
         print(f"warning: {w}", file=sys.stderr)
     if "error" in figures:
         print(f"error: {figures['error']}", file=sys.stderr)
         return 2
+    figures = {"run_id": uuid.uuid4().hex} | figures | {"blend": str(blend)}
+    text = finite_json(figures)
+    size = (scene.render.resolution_x * scene.render.resolution_percentage // 100,
+            scene.render.resolution_y * scene.render.resolution_percentage // 100)
+
+    def check_exr(path):
+        channels, _ = read_exr_channels(path)
+        y = next((c for name, c in channels.items() if name.endswith(".Y.X") or name == "Y"), None)
+        if y is None or y.shape[::-1] != size or not np.all(np.isfinite(y)):
+            raise ValueError(f"expected a finite Y pass of {size[0]} x {size[1]} pixels")
+
+    try:
+        outputs.commit([OutputFile("image.exr", lambda path: shutil.copyfile(rendered, path), check_exr),
+                        OutputFile("report.json", lambda path: path.write_text(text), lambda path: json.loads(
+                            path.read_text()))])
+    except OutputWriteError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 4
+    outputs.keep()
     print(f"{figures['method']}: {figures['rays']:,} rays in {figures['seconds']:.1f} s, efficiency "
-          f"{figures['efficiency']:.3g}, luminance mean {figures['luminance']['mean']:.4g} cd/m^2 -> {out}",
-          file=sys.stderr)
+          f"{figures['efficiency']:.3g}, luminance mean {figures['luminance']['mean']:.4g} cd/m^2 -> "
+          f"{outputs.folder}", file=sys.stderr)
     return 0
 
 

@@ -142,11 +142,32 @@ def test_hud_render_renders_a_saved_blend(tmp_path):
                            "--method", "backward", "--seed", "2"], capture_output=True, text=True, timeout=600,
                           cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    assert sorted(p.name for p in out.iterdir()) == ["image.exr", "report.json"]  # a set, nothing else
     report = json.loads((out / "report.json").read_text())
     assert report["method"] == "backward" and report["rays"] >= 600_000 and report["seed"] == 2
+    assert len(report["run_id"]) == 32
     ch = read_multilayer(out / "image.exr")
     y = ch["ViewLayer.Y.X"]
     assert np.all(np.isfinite(y)) and abs(y.max() - 850.0) < 0.02 * 850
+
+
+@pytest.mark.parametrize("case", ["--out is a file", "--seconds nan"])
+def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
+    """hud-render checks its arguments and locks its output folder first (issue 9): one line, exit 2,
+    and the .blend is not even opened (it does not exist here: the refusal comes before)."""
+    out = tmp_path / "out"
+    args = ["--rays", "1000"]
+    if case == "--out is a file":
+        out.write_text("x")
+    else:
+        args = ["--seconds", "nan"]
+    blend = tmp_path / "scene.blend"
+    blend.write_bytes(b"BLENDER")
+    proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), *args],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and ("--seconds" in lines[0] or str(out) in lines[0])
 
 
 def test_show_light_paths_draws_paths_that_end_at_the_eye():
