@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import io
 import tempfile
+import time
 import zipfile
 from pathlib import Path
 
@@ -77,6 +78,7 @@ class DaskExecutor:
 def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
                 should_stop=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
+    started = time.perf_counter()  # a time budget counts the pilot and the upload of the scene
     local.fit_batch(budget)  # before the batch size travels to the workers
     blob = pack_scene(local.scene.root)
     digest = hashlib.sha256(blob).hexdigest()
@@ -89,6 +91,6 @@ def render_dask(local, budget: Budget, client, in_flight: int | None = None, pro
                              key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
 
     result = drive(local, budget, DaskExecutor(client, submit, workers), in_flight or 2 * workers, progress,
-                   should_stop, f"dask x{workers}")
+                   should_stop, f"dask x{workers}", started=started)
     result.extra["dask_workers"] = workers
     return result

@@ -84,6 +84,7 @@ class PoolExecutor:
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
     folder, method, seed and batch size; see the module docstring)."""
+    started = time.perf_counter()  # a time budget counts the pilot and the workers' start-up
     local.fit_batch(budget)  # before the workers take the batch size
     ctx = mp.get_context("spawn")
     ready = ctx.Queue()
@@ -93,7 +94,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
         for _ in range(workers):
             ready.get(timeout=600)
         startup = time.perf_counter() - t0
-        result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop, f"x{workers}")
+        result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop, f"x{workers}",
+                       started=started)
         pool.terminate()  # batches still in flight are not needed
     result.extra["workers"] = workers
     result.extra["startup_seconds"] = startup

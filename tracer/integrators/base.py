@@ -258,8 +258,9 @@ class Integrator:
                should_stop: ShouldStop | None = None) -> RenderResult:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
+        started = time.perf_counter()
         self.fit_batch(budget)
-        return drive(self, budget, LocalExecutor(self), 1, progress, should_stop)
+        return drive(self, budget, LocalExecutor(self), 1, progress, should_stop, started=started)
 
     def merge_extra(self, total: dict, batch: dict):
         """Fold a batch's ``extra`` figures into the render's (default: add numbers)."""
@@ -332,7 +333,7 @@ class LocalExecutor:
 
 
 def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress: Progress | None = None,
-          should_stop: ShouldStop | None = None, label: str = "") -> RenderResult:
+          should_stop: ShouldStop | None = None, label: str = "", started: float | None = None) -> RenderResult:
     """Hand out batch indices in increasing order to ``executor`` (``submit(k)`` -> handle,
     ``wait(handles, timeout)`` -> indices done, ``result(handle)`` -> BatchResult), keep at most
     ``in_flight`` running, and merge the contiguous prefix of finished batches in batch order until
@@ -342,7 +343,10 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     No batch is issued that cannot land within the budget: with a budget in seconds, none once the
     time left is shorter than a batch takes; with a budget in rays, none beyond the rays that the
     merged and running batches will already bring (estimated from the finished ones). When the
-    budget is met, batches still running are dropped, not awaited."""
+    budget is met, batches still running are dropped, not awaited; but at least one batch is merged,
+    however short the budget, so that an image is never empty for lack of time. A time budget counts
+    from ``started`` (``time.perf_counter()`` when the render began: the pilot and the workers'
+    start-up are part of the wall time the user gave), by default from now."""
     method = f"{local.name} {label}" if label else local.name
     done: dict[int, BatchResult] = {}
     pending: dict[int, object] = {}
@@ -354,9 +358,12 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     batch_rays: list[int] = []
     first = (0.0, 0)  # (seconds, rays) when the first batch was merged
     partial = False
-    start = time.perf_counter()
+    start = time.perf_counter() if started is None else started
 
     workers = getattr(executor, "workers", 1)
+
+    def met() -> bool:
+        return merged > 0 and budget.fraction(rays, time.perf_counter() - start) >= 1.0
 
     def worth_issuing() -> bool:
         if not batch_seconds:
@@ -372,8 +379,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
         return True
 
     while True:
-        elapsed = time.perf_counter() - start
-        if budget.fraction(rays, elapsed) >= 1.0:
+        if met():
             break  # batches still in flight would land beyond the budget: dropped, not awaited
         if should_stop is not None and should_stop():
             partial = True
@@ -382,7 +388,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
             pending[next_index] = executor.submit(next_index)
             next_index += 1
         if not pending:
-            if budget.seconds is not None and budget.rays is None:
+            if budget.seconds is not None and budget.rays is None and merged > 0:
                 break  # no batch can finish within the time left
             pending[next_index] = executor.submit(next_index)
             next_index += 1
@@ -392,7 +398,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
             done[k] = executor.result(pending.pop(k))
             batch_seconds.append(done[k].seconds)
             batch_rays.append(done[k].rays)
-        while merged in done and budget.fraction(rays, time.perf_counter() - start) < 1.0:
+        while merged in done and not met():
             b = done.pop(merged)
             film.merge_arrays(b.film)
             paths, found, rays, truncated = paths + b.paths, found + b.found, rays + b.rays, truncated + b.truncated
