@@ -504,3 +504,25 @@ def test_22_a_time_budget_holds_on_a_machine_that_slows_down(preset):
     res = integ.render(Budget(seconds=1.0))
     wall = time.perf_counter() - t0
     assert res.batches >= 10 and wall < 1.0 * 1.12, (wall, res.batches)
+
+
+# -- hud-trace export: the same contract -----------------------------------------------------------------
+@pytest.mark.parametrize("where", ["under a file", "a file", "/dev/null", "/proc/x", "not empty"])
+def test_export_into_a_place_that_cannot_take_it_gives_one_line(tmp_path, where):
+    f = tmp_path / "f"
+    f.write_text("x")
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("mine")
+    target = {"under a file": f / "sub", "a file": f, "/dev/null": Path("/dev/null"), "/proc/x": Path("/proc/x"),
+              "not empty": full}[where]
+    code, err = run_cli("export", "hud-direct", target)
+    assert_one_line_error(code, err, str(target))
+    assert f.read_text() == "x" and (full / "keep.txt").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f", "full"]  # no staging folder left
+
+
+def test_export_on_a_full_disk_leaves_nothing(tmp_path):
+    res = hud_trace("export", "hud-direct", tmp_path / "s", preexec_fn=_limit_file_size)
+    assert res.returncode == 4 and "Traceback" not in res.stderr, res.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -182,19 +182,37 @@ def cmd_presets(args) -> int:
 
 
 def cmd_export(args) -> int:
+    """Write a preset's scene folder into an absent or empty folder, as a unit: staged beside it, then
+    renamed into place (exit 2 for a target that cannot take it, 4 when writing fails; nothing is
+    left behind either way)."""
     from presets import PRESETS
 
     if args.preset not in PRESETS:
         raise SceneError(args.preset, "", f"unknown preset (presets: {', '.join(PRESETS)})")
-    out = Path(args.dir)
-    if out.exists() and any(out.iterdir()):
-        raise SceneError(str(out), "", "the target folder exists and is not empty")
-    with tempfile.TemporaryDirectory(dir=out.parent if out.parent.exists() else None) as tmp:
+    out = Path(os.path.abspath(args.dir))
+    try:
+        if out.exists() and not out.is_dir():
+            raise SceneError(str(out), "", "exists and is not a folder")
+        if out.is_dir() and any(out.iterdir()):
+            raise SceneError(str(out), "", "the target folder exists and is not empty")
+        parent = next(p for p in out.parents if p.exists())
+        if not parent.is_dir():
+            raise SceneError(str(out), "", f"cannot be made: {parent} is not a folder")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=out.parent)
+    except OSError as e:
+        raise SceneError(str(out), "", f"cannot be made ({e.strerror or e})") from None
+    try:
         staged = Path(tmp) / "scene"
         PRESETS[args.preset].write(staged)
         if out.exists():
             out.rmdir()
-        shutil.move(str(staged), str(out))
+        os.rename(staged, out)
+    except OSError as e:
+        print(f"error: {out}: writing the scene failed ({e.strerror or e}); nothing was written", file=sys.stderr)
+        return EXIT_WRITE
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     print(f"wrote {args.preset} to {out}", file=sys.stderr)
     return 0
 
