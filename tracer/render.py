@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 import uuid
 from pathlib import Path
 
@@ -385,7 +386,9 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         preview, info = tonemap_ward(image, adaptation_luminance(y))
         analysis = None
         if analyse and world.accel is not None and not result.partial:
+            t0 = time.perf_counter()
             analysis = brightness_theorem(world, y, var_y, INTEGRATORS[method].renders_environment)
+            analysis["seconds"] = time.perf_counter() - t0  # after the budget: not part of it
         report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
         run_id = uuid.uuid4().hex
         report = {"run_id": run_id} | report
