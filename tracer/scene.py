@@ -356,7 +356,7 @@ def _check_closed_outward(ck: FieldChecker, vw: np.ndarray, faces: np.ndarray, f
     what = "a dielectric must be a closed surface with outward normals (it bounds the glass)"
     if np.any(undirected_count == 1):
         ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count == 1))} edges belong to one triangle only "
-                     "(the surface is open)")
+                     "(the surface is open; model a thin sheet of glass as a box of its thickness)")
     if np.any(undirected_count > 2):
         ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count > 2))} edges belong to more than two triangles")
     if np.any(directed_count > 1):
