@@ -47,7 +47,8 @@ def test_render_hud_direct_writes_image_preview_report(tmp_path):
     # The symbols follow the brightness theorem; the black leak is symbol / 300 (plus ghost spill).
     assert bt["symbol"]["predicted_cd_m2"] > 0
     sym = bt["symbol"]
-    assert abs(sym["rendered_cd_m2"] - sym["predicted_cd_m2"]) < 4.5 * sym["standard_error_cd_m2"]
+    assert abs(sym["rendered_cd_m2"] - sym["predicted_cd_m2"]) < 4.5 * math.hypot(
+        sym["standard_error_cd_m2"], sym["predicted_standard_error_cd_m2"])
     assert "ghost" in bt and bt["ghost"]["ratio_to_symbol"] > 0.3
     assert (out / "preview.png").is_file()
 

@@ -183,11 +183,11 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     """Follow chief rays of a pixel grid (or along given world ``directions`` (p, 3) from the pupil
     centre, or of the given flat ``pixels``) through all specular branches.
 
-    With ``pupil_grid`` n > 0 every pixel is followed from n x n pupil points instead of the centre
-    (stratified over the pupil disk, jittered by ``seed``), and each ray's luminance is divided by
-    n^2, so that the sum over a pixel's rays is the pupil average: the pixel's luminance where its
-    rays see different things (paper eq. 2). ``environment`` False leaves the environment out (for
-    methods that do not render it).
+    With ``pupil_grid`` n > 0 every pixel is followed by n x n rays instead of its chief ray, from
+    points stratified over the pupil disk and uniform over the pixel's area (random by ``seed``), and
+    each ray's luminance is divided by n^2, so that the sum over a pixel's rays is its average over
+    the pupil and the pixel: the pixel's luminance where its rays see different things (paper eq. 2).
+    ``environment`` False leaves the environment out (for methods that do not render it).
 
     Returns a dict with ``pixels`` (p,) flat indices analysed (or 0..p-1 for given directions),
     ``stride``, ``grid``, ``pupil_samples`` (n^2, or 1 for chief rays), ``specular_blockers``
@@ -195,7 +195,7 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     {"path": str, "pixel" (k,) positions into ``pixels``, "luminance" (k, 3) predicted cd/m^2,
     "factor" (k,) Y of the product of R and T, "lcd" (k,) the first LCD's transmittance relative to
     a clear cell, NaN if none, "through_specular" (k,) Y cd/m^2 a scattering leaf would add were its
-    specular blockers clear}.
+    specular blockers clear, "ray" (k,) the ray's index: pixel position * n^2 + sample}.
     """
     eye = world.eye
     w, h = eye.width, eye.height
@@ -217,13 +217,20 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
             jj = np.zeros((1, len(pixels)))
         sx, sy = eye.pixel_centers()
         px = pixels
+        rx, ry = sx[px % w], sy[px // w]
         if pupil_grid > 0:
             n2 = pupil_grid * pupil_grid
             px = np.repeat(pixels, n2)
             cell = np.tile(np.arange(n2), len(pixels))
-            u = (np.stack([cell % pupil_grid, cell // pupil_grid]) + make_rng(seed).random((2, len(px)))) / pupil_grid
+            rng = make_rng(seed)
+            u = (np.stack([cell % pupil_grid, cell // pupil_grid]) + rng.random((2, len(px)))) / pupil_grid
             lens = uniform_disk_concentric(u) * eye.pupil_radius
-        o, d, _ = eye.generate_rays(sx[px % w], sy[px // w], lens if lens is not None else np.zeros((2, len(px))))
+            # A point uniform over the pixel too: the pixel's value is its average over its area and
+            # the pupil (paper eq. 2), which the render estimates.
+            jitter = rng.random((2, len(px))) - 0.5
+            rx = sx[px % w] + jitter[0] * eye.pixel_w
+            ry = sy[px // w] + jitter[1] * eye.pixel_h
+        o, d, _ = eye.generate_rays(rx, ry, lens if lens is not None else np.zeros((2, len(px))))
     samples = pupil_grid * pupil_grid if lens is not None else 1
     n = d.shape[1]
     method = ChiefRays(world, environment=environment)
@@ -240,7 +247,7 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         lc = np.concatenate([p[3] for p in parts])
         thr = np.concatenate([p[4] for p in parts]) / samples
         paths.append({"path": " > ".join(method.names[s]), "pixel": own, "luminance": lum, "factor": fac, "lcd": lc,
-                      "through_specular": thr})
+                      "through_specular": thr, "ray": np.concatenate([p[0] for p in parts])})
     paths.sort(key=lambda p: -float(luminance3(p["luminance"].T).sum()))
     return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths, "pupil_samples": samples,
             "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()}}

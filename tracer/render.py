@@ -99,7 +99,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     all eroded by one grid cell, so edges blurred by the pupil are left out. Up to PUPIL_PIXELS
     evenly spaced pixels of each section are compared (``pixels``; the section has
     ``section_pixels``): the rendered mean over them against a prediction that follows each of them
-    from PUPIL_GRID^2 points over the pupil
+    with PUPIL_GRID^2 rays from points over the pupil and the pixel (with its standard error)
     (``predicted_cd_m2``; the chief ray's alone is ``predicted_chief_ray_cd_m2``, their ratio
     ``pupil_fill``), and its breakdown by path sums to it ("other paths" included). ``environment``
     False (a method that does not render it) leaves the environment out of the prediction.
@@ -171,6 +171,14 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
         entry["section_pixels"] = int(len(idx))
         pred = float(p_total.mean())
+        # The prediction's own sampling error: each pixel's mean of its n^2 rays (the stratified
+        # variance is at most this estimate).
+        n2 = pup["pupil_samples"]
+        per_ray = np.zeros(len(sel) * n2)
+        for p in pup["paths"]:
+            np.add.at(per_ray, p["ray"], luminance(p["luminance"]) * n2)
+        var_pixel = per_ray.reshape(len(sel), n2).var(axis=1, ddof=1) / n2
+        entry["predicted_standard_error_cd_m2"] = float(math.sqrt(var_pixel.sum()) / len(sel))
         chief = float(total[sel].mean())
         entry["predicted_cd_m2"] = pred
         entry["predicted_chief_ray_cd_m2"] = chief

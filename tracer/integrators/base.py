@@ -358,7 +358,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     batch_rays: list[int] = []
     first = (0.0, 0)  # (seconds, rays) when the first batch was merged
     partial = False
-    start = time.perf_counter() if started is None else started
+    setup = 0.0 if started is None else time.perf_counter() - started  # the pilot, the workers' start-up
+    start = time.perf_counter() - setup
 
     workers = getattr(executor, "workers", 1)
 
@@ -417,6 +418,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     result = RenderResult(local.name, local.seed, film, rays, paths, found, seconds, partial, merged,
                           list(local.warnings), dict(extra))
     result.stages = {k: float(v) for k, v in stages.seconds.items()}
+    result.extra["setup_seconds"] = setup
     if merged > 1 and seconds > first[0]:
         result.extra["steady_rays_per_second"] = (rays - first[1]) / (seconds - first[0])
     local.truncated = truncated
