@@ -142,7 +142,8 @@ def cmd_render(args) -> int:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
-                                          should_stop=flag, batch_size=args.batch_size, workers=args.workers)
+                                          should_stop=flag, batch_size=args.batch_size, workers=args.workers,
+                                          analyse=not args.no_analysis)
     except (OutputFolderError, EstimateOverflowError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
@@ -252,6 +253,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="processes (default: one per core); with --rays the image does not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--no-analysis", action="store_true",
+                   help="leave the brightness-theorem comparison out of report.json (it follows the render and "
+                        "takes about 5 s on hud-direct)")
     r.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder (absolute paths, \"..\", links "
                         "out of it); the folder is then no longer self-contained")
