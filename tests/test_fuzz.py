@@ -150,9 +150,28 @@ def mutate_text(text: str, rng: random.Random) -> str:
     return text.replace(":", ": -", 1)
 
 
+def mutate_texture(folder: Path, rng: random.Random) -> str:
+    """Spoil one texture: truncated (libpng then prints its own error lines), garbage, empty,
+    deleted. Returns a description."""
+    tex = rng.choice(sorted((folder / "textures").iterdir()))
+    data = tex.read_bytes()
+    op = rng.randrange(4)
+    if op == 0:
+        tex.write_bytes(data[:rng.randrange(1, len(data))])
+    elif op == 1:
+        tex.write_bytes(bytes(rng.randrange(256) for _ in range(200)))
+    elif op == 2:
+        tex.write_bytes(b"")
+    else:
+        tex.unlink()
+    return f"texture {tex.name} op {op}"
+
+
 def mutate_mesh(folder: Path, rng: random.Random) -> str:
     """Spoil one mesh file of the scene: truncated, a non-finite or huge vertex, no faces, deleted,
     a face index out of range. Returns a description."""
+    if (folder / "textures").is_dir() and rng.random() < 0.3:
+        return mutate_texture(folder, rng)
     meshes = sorted((folder / "meshes").iterdir())
     mesh = rng.choice(meshes)
     lines = mesh.read_text().splitlines()

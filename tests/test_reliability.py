@@ -526,3 +526,15 @@ def test_export_on_a_full_disk_leaves_nothing(tmp_path):
     res = hud_trace("export", "hud-direct", tmp_path / "s", preexec_fn=_limit_file_size)
     assert res.returncode == 4 and "Traceback" not in res.stderr, res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_truncated_texture_gives_one_line_not_the_image_library_s_own(preset, tmp_path):
+    """libpng prints its errors to the process' stderr beside the error OpenImageIO returns, which
+    itself can span lines: the user gets one line (checked in a subprocess, where C output shows)."""
+    folder = preset("hud-direct")
+    slide = folder / "textures" / "slide.png"
+    slide.write_bytes(slide.read_bytes()[:100])
+    res = hud_trace("render", folder, "--rays", 1000, "--workers", 1, "--quiet", "--out", tmp_path / "o")
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "textures/slide.png" in lines[0], res.stderr

@@ -11,6 +11,12 @@ class TracerError(Exception):
     """Base class of every error the tracer raises on purpose."""
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-empty lines joined by "; " (libraries' messages can span
+    several, and the command line promises one line per error)."""
+    return "; ".join(line.strip() for line in str(text).splitlines() if line.strip())
+
+
 class SceneError(TracerError):
     """Bad input: a scene folder, a scene.json field, a mesh or an image.
 
@@ -28,7 +34,7 @@ class SceneError(TracerError):
     def __init__(self, file: str, field: str, message: str):
         self.file = str(file)
         self.field = field
-        self.message = message
+        self.message = message = one_line(message)
         where = f"{self.file}: {field}" if field else self.file
         super().__init__(f"{where}: {message}")
 
@@ -38,7 +44,7 @@ class ImageReadError(TracerError):
 
     def __init__(self, path: str, reason: str):
         self.path = str(path)
-        self.reason = reason
+        self.reason = reason = one_line(reason)
         super().__init__(f"{self.path}: {reason}")
 
 

@@ -10,8 +10,10 @@ Radiance HDR, float TIFF) hold linear values and are returned as stored.
 
 from __future__ import annotations
 
+import contextlib
 import numbers
 import os
+import sys
 import uuid
 from pathlib import Path
 
@@ -69,12 +71,38 @@ def srgb_encode(v) -> np.ndarray:
     return np.where(v <= 0.0031308, 12.92 * v, curve)
 
 
+@contextlib.contextmanager
+def _c_stderr_silenced():
+    """Send what C libraries write to file descriptor 2 while the block runs to /dev/null: libpng
+    prints its errors there, beside the error text OpenImageIO returns (which the caller reports)."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no file descriptor 2 (an embedding host): nothing to silence
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def _read_pixels(path) -> tuple[oiio.ImageSpec, np.ndarray]:
     """Read the first subimage of ``path`` as stored, as float32 of shape (H, W, C).
 
     Colour is not multiplied by alpha (the ``oiio:UnassociatedAlpha`` reader hint). Raises
-    :class:`ImageReadError` with OpenImageIO's error text on failure.
+    :class:`ImageReadError` with OpenImageIO's error text on failure; what the format's C library
+    prints on the way is kept off the terminal (a truncated PNG made libpng print two more lines).
     """
+    with _c_stderr_silenced():
+        return _read_pixels_as_stored(path)
+
+
+def _read_pixels_as_stored(path) -> tuple[oiio.ImageSpec, np.ndarray]:
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import TracerError
+from .errors import TracerError, one_line
 
 try:
     import fcntl
@@ -56,7 +56,7 @@ class OutputError(TracerError):
 
     def __init__(self, path, message: str):
         self.path = str(path)
-        self.message = message
+        self.message = message = one_line(message)
         super().__init__(f"{self.path}: {message}")
 
 
@@ -144,7 +144,10 @@ class OutputSet:
 
     def _remove_stale_staging(self):
         for p in self.folder.glob(f"{STAGING_PREFIX}*"):
-            shutil.rmtree(p, ignore_errors=True)
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
 
     # -- after the render ------------------------------------------------------------------------
     def commit(self, files: list[OutputFile]):
