@@ -128,19 +128,39 @@ class OutputSet:
         return self
 
     def _lock(self):
+        """flock the folder. Several renders may create it at once, and one that then fails removes the
+        folder it made (only while it holds the lock): a lock on a folder that is no longer the one at
+        the path is dropped and taken again on the new one."""
         if fcntl is None:
             return
-        try:
-            self._fd = os.open(self.folder, os.O_RDONLY)
-        except OSError as e:
-            raise OutputFolderError(self.folder, f"cannot be opened ({e.strerror or e})") from None
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self._fd)
-            self._fd = None
-            raise OutputFolderError(self.folder, "another render is writing into this folder; choose another "
-                                                 "--out or wait for it to finish") from None
+        for _ in range(10):
+            try:
+                fd = os.open(self.folder, os.O_RDONLY)
+            except FileNotFoundError:
+                self.folder.mkdir(parents=True, exist_ok=True)
+                continue
+            except OSError as e:
+                raise OutputFolderError(self.folder, f"cannot be opened ({e.strerror or e})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                raise OutputFolderError(self.folder, "another render is writing into this folder; choose another "
+                                                     "--out or wait for it to finish") from None
+            try:
+                current = os.path.samestat(os.fstat(fd), os.stat(self.folder))
+            except FileNotFoundError:
+                current = False
+            if current:
+                self._fd = fd
+                return
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+            try:
+                self.folder.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise OutputFolderError(self.folder, f"cannot be made ({e.strerror or e})") from None
+        raise OutputFolderError(self.folder, "was removed again and again while being locked; choose another --out")
 
     def _remove_stale_staging(self):
         for p in self.folder.glob(f"{STAGING_PREFIX}*"):
@@ -206,19 +226,23 @@ class OutputSet:
 
     # -- always ----------------------------------------------------------------------------------
     def close(self):
-        """Release the lock; remove the folders :meth:`open` made if they hold nothing."""
+        """Remove the folders :meth:`open` made if they hold nothing, then release the lock. Only a
+        render that held the lock removes anything: one refused by the lock leaves the folder to the
+        render that holds it (it may have made it at the same moment)."""
+        held = self._fd is not None or fcntl is None
+        if held:
+            for p in reversed(self._created):  # innermost first
+                try:
+                    p.rmdir()
+                except OSError:
+                    break
+        self._created = []
         if self._fd is not None:
             try:
                 fcntl.flock(self._fd, fcntl.LOCK_UN)
             finally:
                 os.close(self._fd)
                 self._fd = None
-        for p in reversed(self._created):  # innermost first
-            try:
-                p.rmdir()
-            except OSError:
-                break
-        self._created = []
 
     def keep(self):
         """The render wrote its set: the folders made by :meth:`open` stay."""
