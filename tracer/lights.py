@@ -255,19 +255,28 @@ class LightTable:
         return w, dist, np.take(self.radiance32, tri, axis=1) * lit, np.abs(cos_y)
 
     # -- the brightness-theorem analysis --------------------------------------------------------
-    def quadrature(self, level: int = 4):
+    def quadrature(self, level: int | np.ndarray = 4):
         """Deterministic quadrature of every light triangle: points (3, q), normals (3, q), weights
         (q,) mm^2, radiance (3, q), two-sided flags (q,): the midpoints of a level x level subdivision
-        of each triangle into equal-area cells."""
-        cells = []
-        for i in range(level):
-            for j in range(level - i):
-                cells.append(((i + 1 / 3) / level, (j + 1 / 3) / level))
-                if i + j < level - 1:
-                    cells.append(((i + 2 / 3) / level, (j + 2 / 3) / level))
-        b = np.array(cells).T  # (2, c)
-        c = b.shape[1]
+        of each triangle into equal-area cells (centroid rule, exact for linear integrands). ``level``
+        is one for all triangles or one per triangle (T,)."""
         t = self.tris
-        pts = (t.v0[:, :, None] + b[0] * t.e1[:, :, None] + b[1] * t.e2[:, :, None]).reshape(3, -1)
-        rep = lambda a: np.repeat(a, c, axis=-1)  # noqa: E731
-        return pts, rep(t.normal), rep(t.area / c), rep(self.radiance), rep(self.two_sided)
+        levels = np.broadcast_to(np.asarray(level, dtype=np.int64), (t.area.shape[0],))
+        parts = []
+        for lv in np.unique(levels).tolist():
+            idx = np.flatnonzero(levels == lv)
+            cells = []
+            for i in range(lv):
+                for j in range(lv - i):
+                    cells.append(((i + 1 / 3) / lv, (j + 1 / 3) / lv))
+                    if i + j < lv - 1:
+                        cells.append(((i + 2 / 3) / lv, (j + 2 / 3) / lv))
+            b = np.array(cells).T  # (2, c)
+            c = b.shape[1]
+            v0, e1, e2 = (np.take(a, idx, axis=1)[:, :, None] for a in (t.v0, t.e1, t.e2))
+            pts = (v0 + b[0] * e1 + b[1] * e2).reshape(3, -1)
+            parts.append((pts, *(np.repeat(np.take(a, idx, axis=-1), c, axis=-1)
+                                 for a in (t.normal, t.area / c, self.radiance, self.two_sided))))
+        if not parts:
+            return np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0), np.zeros((3, 0)), np.zeros(0, bool)
+        return tuple(np.concatenate(arrays, axis=-1) for arrays in zip(*parts, strict=True))
