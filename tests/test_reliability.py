@@ -538,3 +538,13 @@ def test_a_truncated_texture_gives_one_line_not_the_image_library_s_own(preset, 
     assert res.returncode == 2, res.stderr
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "textures/slide.png" in lines[0], res.stderr
+
+
+def test_a_key_with_a_control_character_is_named_on_one_line(mirror, earlier):
+    """Found by fuzzing: a key "sha\\re" in scene.json was echoed raw, and its carriage return split
+    the error line in two. Keys and values are escaped in messages."""
+    out, before = earlier
+    edit_json(mirror, lambda d: d["objects"][2]["emission"].update({"sha\re": 1}))
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "objects[2].emission.sha\\re", "unknown field")
+    assert hashes(out) == before

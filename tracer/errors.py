@@ -17,6 +17,12 @@ def one_line(text: str) -> str:
     return "; ".join(line.strip() for line in str(text).splitlines() if line.strip())
 
 
+def printable(text: str) -> str:
+    """``text`` with every non-printable character escaped ("\\r", "\\x00"): a key or value copied
+    from a user's file into a message must not break its line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+
+
 class SceneError(TracerError):
     """Bad input: a scene folder, a scene.json field, a mesh or an image.
 
@@ -32,8 +38,8 @@ class SceneError(TracerError):
     """
 
     def __init__(self, file: str, field: str, message: str):
-        self.file = str(file)
-        self.field = field
+        self.file = printable(file)
+        self.field = field = printable(field)
         self.message = message = one_line(message)
         where = f"{self.file}: {field}" if field else self.file
         super().__init__(f"{where}: {message}")
