@@ -49,7 +49,7 @@ class ImageReadError(TracerError):
     """An image file could not be read (missing, unreadable or of an unsupported format)."""
 
     def __init__(self, path: str, reason: str):
-        self.path = str(path)
+        self.path = printable(path)
         self.reason = reason = one_line(reason)
         super().__init__(f"{self.path}: {reason}")
 

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import TracerError, one_line
+from .errors import TracerError, one_line, printable
 
 try:
     import fcntl
@@ -55,7 +55,7 @@ class OutputError(TracerError):
     """An output folder or file problem; ``path`` is the folder or file at fault."""
 
     def __init__(self, path, message: str):
-        self.path = str(path)
+        self.path = printable(path)
         self.message = message = one_line(message)
         super().__init__(f"{self.path}: {message}")
 
