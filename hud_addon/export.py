@@ -30,6 +30,7 @@ from ..tracer.imageio import write_exr
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
+from ..tracer.outputs import replace_folder
 from . import schema_ui
 
 #: Metres to millimetres.
@@ -362,26 +363,6 @@ def _check_replaceable(target: Path) -> None:
                          "whole)")
 
 
-def _swap_in(staging: Path, target: Path, backup: Path) -> None:
-    """Put ``staging`` in the place of ``target``. An existing target is first renamed to ``backup``
-    and renamed back if the staging folder cannot take its place; once it has, the backup is
-    removed (should that fail, the new export stands and a warning names the leftover)."""
-    if not target.exists():
-        os.rename(staging, target)
-        return
-    os.rename(target, backup)
-    try:
-        os.rename(staging, target)
-    except BaseException:
-        os.rename(backup, target)
-        raise
-    try:
-        shutil.rmtree(backup)
-    except OSError as e:
-        print(f"HUD export: written to {target}, but the earlier export's copy {backup} could not be removed: {e}",
-              file=sys.stderr)
-
-
 def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = None) -> Path:
     """Write the scene folder for ``depsgraph``'s scene into ``folder``; returns ``folder``.
 
@@ -433,8 +414,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     text = json.dumps(data, indent=2) + "\n"
 
     target.parent.mkdir(parents=True, exist_ok=True)
-    token = uuid.uuid4().hex
-    staging = target.parent / f".{target.name}.staging-{token}"
+    staging = target.parent / f".{target.name}.staging-{uuid.uuid4().hex}"
     staging.mkdir()
     try:
         plan.write(staging)
@@ -442,8 +422,11 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
         _check_staged(staging, target, plan.files)
         if check is not None:
             check(staging)
-        _swap_in(staging, target, target.parent / f".{target.name}.backup-{token}")
+        leftover = replace_folder(staging, target)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    if leftover is not None:
+        print(f"HUD export: written to {target}, but the earlier export's copy {leftover} could not be removed",
+              file=sys.stderr)
     return Path(folder)

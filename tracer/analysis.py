@@ -60,18 +60,18 @@ def quadrature_levels(world, level: int = 4) -> np.ndarray:
     nearest scattering surface (the bounding box of any object whose material is neither purely
     specular nor black). hud-direct's LED dies, 0.2 mm at some 20 mm, need one point, not 16."""
     tris = world.lights.tris
-    if tris.area.shape[0] == 0:
+    if len(tris) == 0:
         return np.zeros(0, np.int64)
     boxes = [(o.vertices.min(axis=0), o.vertices.max(axis=0)) for m in world.materials
              if m.flags != 0 and not m.flags & DELTA for o in m.objects]
     if not boxes:
-        return np.ones(tris.area.shape[0], np.int64)  # no scattering leaf will use the quadrature
+        return np.ones(len(tris), np.int64)  # no scattering leaf will use the quadrature
     centroid = (tris.v0 + (tris.e1 + tris.e2) / 3).T  # (T, 3)
     lo = np.array([b[0] for b in boxes])[None]  # (1, B, 3)
     hi = np.array([b[1] for b in boxes])[None]
     gap = np.maximum(np.maximum(lo - centroid[:, None], centroid[:, None] - hi), 0.0)
     dist = np.sqrt((gap * gap).sum(axis=2)).min(axis=1)
-    size = np.sqrt(np.maximum.reduce([(e * e).sum(axis=0) for e in (tris.e1, tris.e2, tris.e2 - tris.e1)]))
+    size = np.maximum.reduce([norm(e) for e in (tris.e1, tris.e2, tris.e2 - tris.e1)])  # longest edge
     need = np.ceil(size / np.maximum(QUAD_RATIO * dist, 1e-300))
     return np.clip(need, 1, level).astype(np.int64)
 

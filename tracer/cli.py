@@ -188,6 +188,8 @@ def cmd_export(args) -> int:
     left behind either way)."""
     from presets import PRESETS
 
+    from .outputs import replace_folder
+
     if args.preset not in PRESETS:
         raise SceneError(args.preset, "", f"unknown preset (presets: {', '.join(PRESETS)})")
     out = Path(os.path.abspath(args.dir))
@@ -206,9 +208,7 @@ def cmd_export(args) -> int:
     try:
         staged = Path(tmp) / "scene"
         PRESETS[args.preset].write(staged)
-        if out.exists():
-            out.rmdir()
-        os.rename(staged, out)
+        replace_folder(staged, out)  # an empty target's backup is removed at once
     except OSError as e:
         print(f"error: {out}: writing the scene failed ({e.strerror or e}); nothing was written", file=sys.stderr)
         return EXIT_WRITE

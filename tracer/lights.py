@@ -261,7 +261,7 @@ class LightTable:
         of each triangle into equal-area cells (centroid rule, exact for linear integrands). ``level``
         is one for all triangles or one per triangle (T,)."""
         t = self.tris
-        levels = np.broadcast_to(np.asarray(level, dtype=np.int64), (t.area.shape[0],))
+        levels = np.broadcast_to(np.asarray(level, dtype=np.int64), (len(t),))
         parts = []
         for lv in np.unique(levels).tolist():
             idx = np.flatnonzero(levels == lv)

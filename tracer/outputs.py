@@ -253,3 +253,27 @@ class OutputSet:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def replace_folder(staging: Path, target: Path) -> Path | None:
+    """Put the complete folder ``staging`` in the place of ``target`` (absent, empty, or an earlier
+    set of files), the folder-level counterpart of :meth:`OutputSet.commit` (``hud-trace export``
+    and the add-on's export). An existing target is renamed aside to a hidden backup beside it and
+    renamed back if ``staging`` cannot take its place; once it has, the backup is removed. Returns
+    the backup's path if that last removal failed (the new folder stands; the caller says so), else
+    None."""
+    if not target.exists():
+        os.rename(staging, target)
+        return None
+    backup = target.parent / f".{target.name}.backup-{uuid.uuid4().hex}"
+    os.rename(target, backup)
+    try:
+        os.rename(staging, target)
+    except BaseException:
+        os.rename(backup, target)
+        raise
+    try:
+        shutil.rmtree(backup)
+    except OSError:
+        return backup
+    return None

@@ -358,8 +358,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     batch_rays: list[int] = []
     first = (0.0, 0)  # (seconds, rays) when the first batch was merged
     partial = False
-    setup = 0.0 if started is None else time.perf_counter() - started  # the pilot, the workers' start-up
-    start = time.perf_counter() - setup
+    start = time.perf_counter() if started is None else started
+    setup = time.perf_counter() - start  # the pilot, the workers' start-up
 
     workers = getattr(executor, "workers", 1)
 
