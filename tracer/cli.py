@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--no-analysis", action="store_true",
                    help="leave the brightness-theorem comparison out of report.json (it follows the render and "
-                        "takes about 0.6 s on hud-direct)")
+                        "takes about 0.7 s on hud-direct)")
     r.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder (absolute paths, \"..\", links "
                         "out of it); the folder is then no longer self-contained")
