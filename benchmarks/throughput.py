@@ -34,6 +34,7 @@ from presets import PRESETS  # noqa: E402
 from tracer.accel import Accelerator  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.integrators.base import DEFAULT_BATCH  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
@@ -44,10 +45,15 @@ VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
             "backward, no NEE": ("backward", {"next_event": False})}
 
 
+#: Paths per batch of the measured renders: the command line's batch for a budget in rays (None: sized
+#: from the pilot to 2 % of the time budget, as --seconds does; --batch-size auto).
+BATCH = DEFAULT_BATCH
+
+
 def make(world: World, label: str, seed: int):
     method, changes = VARIANTS[label]
     opts = dict(world.scene.method_options(method)) | changes
-    return INTEGRATORS[method](world, seed, options=opts)
+    return INTEGRATORS[method](world, seed, batch_size=BATCH, options=opts)
 
 
 def tracing_rate(res) -> float:
@@ -114,7 +120,12 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
+    ap.add_argument("--batch-size", default=str(DEFAULT_BATCH),
+                    help=f"paths per batch (default {DEFAULT_BATCH}, as with --rays), or 'auto' (sized to the time "
+                         "budget, as with --seconds)")
     args = ap.parse_args()
+    global BATCH
+    BATCH = None if args.batch_size == "auto" else int(args.batch_size)
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
         scene = load_scene(folder)
