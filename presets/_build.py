@@ -46,6 +46,65 @@ def sphere(radius: float, subdivisions: int = 4, inward: bool = False):
     return np.asarray(m.vertices), (f[:, ::-1] if inward else f)
 
 
+def _sag(radius: float, rho: np.ndarray) -> np.ndarray:
+    """Sag (mm) of a spherical surface of radius ``radius`` (0: flat) at heights ``rho`` from its axis."""
+    if radius == 0:
+        return np.zeros_like(rho)
+    return radius - np.sign(radius) * np.sqrt(radius * radius - rho * rho)
+
+
+def lens(r_front: float, r_back: float, thickness: float, semi_diameter: float, rings: int = 48,
+         segments: int = 128):
+    """A closed thick lens with outward normals, axis along local z, centred between its apexes:
+    (vertices, faces). The front surface faces +z with its apex at z = thickness / 2; ``r_front`` > 0
+    is convex there, ``r_back`` > 0 convex on the -z side, 0 flat (a plano-convex lens has one 0). The
+    two caps and the cylindrical edge have their own vertices, so smooth normals stay those of each
+    surface (the loader merges coincident vertices when it checks that the glass is closed)."""
+    rho = semi_diameter * np.arange(1, rings + 1) / rings
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    cos, sin = np.cos(ang), np.sin(ang)
+    z_front = 0.5 * thickness - _sag(r_front, rho)
+    z_back = -0.5 * thickness + _sag(r_back, rho)
+    if z_front[-1] - z_back[-1] <= 0:
+        raise ValueError("the lens's edge thickness is not positive: make it thicker")
+
+    def cap(z_apex, z_rings, up: bool):
+        verts = [[0.0, 0.0, z_apex]]
+        for r, z in zip(rho, z_rings, strict=True):
+            verts += np.stack([r * cos, r * sin, np.full(segments, z)], 1).tolist()
+        k = np.arange(segments)
+        faces = [np.stack([np.zeros(segments, int), 1 + k, 1 + (k + 1) % segments], 1)]
+        for i in range(rings - 1):
+            a = 1 + i * segments + k
+            b = 1 + i * segments + (k + 1) % segments
+            c, d = a + segments, b + segments
+            faces += [np.stack([a, c, d], 1), np.stack([a, d, b], 1)]
+        f = np.concatenate(faces)
+        return np.array(verts), (f if up else f[:, ::-1])
+
+    vf, ff = cap(0.5 * thickness, z_front, True)
+    vb, fb = cap(-0.5 * thickness, z_back, False)
+    r = semi_diameter
+    edge_v = np.concatenate([np.stack([r * cos, r * sin, np.full(segments, z_front[-1])], 1),
+                             np.stack([r * cos, r * sin, np.full(segments, z_back[-1])], 1)])
+    k = np.arange(segments)
+    top, bottom = k, segments + k
+    top2, bottom2 = (k + 1) % segments, segments + (k + 1) % segments
+    edge_f = np.concatenate([np.stack([top, bottom, bottom2], 1), np.stack([top, bottom2, top2], 1)])
+    verts = np.concatenate([vf, vb, edge_v])
+    faces = np.concatenate([ff, fb + len(vf), edge_f + len(vf) + len(vb)])
+    return verts, faces
+
+
+def lens_focal_length(r_front: float, r_back: float, thickness: float, ior: float) -> float:
+    """Effective focal length (mm) of a thick lens in air (lensmaker's equation; Hecht, Optics, eq. 6.2),
+    radii signed as in :func:`lens` (convex > 0 on either side, 0 flat)."""
+    c1 = 1.0 / r_front if r_front else 0.0
+    c2 = -1.0 / r_back if r_back else 0.0
+    power = (ior - 1) * (c1 - c2 + (ior - 1) * thickness * c1 * c2 / ior)
+    return 1.0 / power
+
+
 def frame_matrix(origin, x_axis, normal) -> list[list[float]]:
     """4 x 4 matrix placing local (x, y, z) at ``origin`` with local x along ``x_axis`` and local z
     along ``normal`` (y completes a right-handed frame)."""

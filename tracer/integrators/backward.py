@@ -104,6 +104,9 @@ class BackwardTracer(Integrator, PathMethod):
                EXIT_PUPIL)
     components = {"hit": "samples per pixel", "connection": "samples per pixel"}
     mode = RADIANCE
+    #: Connections share the light with the paths' own hits of it (multiple importance sampling); a
+    #: method whose camera paths end at the connecting vertex gives connections the full weight.
+    mis_with_hits = True
     efficiency_definition = "retina samples whose path reached a source or a lit environment / samples"
     found_what = "reached a source"
 
@@ -281,7 +284,7 @@ class BackwardTracer(Integrator, PathMethod):
             w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
             f = bsdf.eval(it, w, RADIANCE)
             p_light = solid_angle_pdf(lights.pdf_power_area(tri), dist, cos_y)
-            mis = self._power_heuristic(p_light, bsdf.pdf(it, w))
+            mis = self._power_heuristic(p_light, bsdf.pdf(it, w)) if self.mis_with_hits else 1.0
             g = cos_y / np.maximum(dist * dist * pdf_area, 1e-300)
             value = state.beta * f * radiance * (g * mis)
             ok = np.flatnonzero(luminance3(value) > 0)
@@ -293,7 +296,7 @@ class BackwardTracer(Integrator, PathMethod):
             w, radiance, p_env = self.env.sample(rng.random((2, m)))
             w = w.astype(F32)
             f = bsdf.eval(it, w, RADIANCE)
-            mis = self._power_heuristic(p_env, bsdf.pdf(it, w))
+            mis = self._power_heuristic(p_env, bsdf.pdf(it, w)) if self.mis_with_hits else 1.0
             value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))
             ok = np.flatnonzero(luminance3(value) > 0)
             if len(ok):

@@ -244,7 +244,7 @@ class Integrator:
         t0 = time.perf_counter()
         timers = Timers()
         ctx = Context(self.world, make_rng(self.seed, index), timers, Splats(), Roulette(reference),
-                      probe_rng=make_rng(self.seed, index, PROBE_STREAM))
+                      probe_rng=make_rng(self.seed, index, PROBE_STREAM), batch=index)
         rays_before, truncated_before = self.world.rays_traced, self.truncated
         paths, found, norms, reps = self.run_batch(ctx)
         with timers("film"):

@@ -27,6 +27,49 @@ from .path import PathMethod, PathState, continue_by_sampling, trace
 REPLICATES = 8
 
 
+class Particles:
+    """Particles leaving the lights, and the samplers that carry them on (forward tracing, the photon
+    pass): a light triangle chosen with probability proportional to its flux, a point uniformly on it,
+    a direction from the Lambertian law, and the paper's directed split (sec. 2) where an emitter or a
+    scattering surface has an ``aim`` (:class:`tracer.optics.aimed.Aimed`)."""
+
+    def __init__(self, world):
+        self.world = world
+        self.lights = world.lights
+        slots = len(world.scene.objects)
+        self.samplers = []
+        for m in world.materials:
+            aims = {o.slot: (world.target(o.material.aim.target), o.material.aim.share, o.material.aim.mode)
+                    for o in m.objects if o.material.aim is not None and o.material.aim.share > 0}
+            self.samplers.append(Aimed(m, aims, slots) if aims else m)
+        self._sampler = {id(m): s for m, s in zip(world.materials, self.samplers, strict=True)}
+        aims = {o.slot: (world.target(o.emission.aim.target), o.emission.aim.share, o.emission.aim.mode)
+                for o in self.lights.objects if o.emission.aim is not None and o.emission.aim.share > 0}
+        self.emission = Aimed(CosineEmission(), aims, slots)
+
+    def sampler(self, bsdf):
+        """The sampler of material ``bsdf`` for particles: the material, or its aimed mixture."""
+        return self._sampler[id(bsdf)]
+
+    def emit(self, rng: np.random.Generator, n: int, first: int, replicates: int) -> tuple[PathState, np.ndarray]:
+        """n particles numbered from ``first``, dealt round-robin into ``replicates``: a state with flux
+        weights (cd/m^2 mm^2 sr) and the particles' starting points (3, k) mm; particles whose direction
+        sample failed are dropped."""
+        lights = self.lights
+        tri, points, normal, pdf_pos = lights.sample_emission(rng.random((4, n)))
+        it = Interaction(-normal, points, normal, normal, None, lights.slot[tri])
+        s = self.emission.sample(it, rng.random((self.emission.dims, n), F32), IMPORTANCE)
+        beta = (np.take(lights.radiance, tri, axis=1) * (np.pi * s.weight / pdf_pos)).astype(F32)
+        alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
+        wo = np.take(s.wo, alive, axis=1)
+        start = np.take(points, alive, axis=1)
+        o = self.world.accel.spawn(start, np.take(normal, alive, axis=1), wo)
+        pid = first + alive
+        state = PathState(o, wo, np.take(beta, alive, axis=1), pid, pid % replicates, s.pdf[alive],
+                          np.zeros(len(alive), bool))
+        return state, start
+
+
 @register
 class ForwardTracer(Integrator, PathMethod):
     name = "forward"
@@ -50,16 +93,7 @@ class ForwardTracer(Integrator, PathMethod):
         elif not w.environment.is_black:
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
                                  "method (the hybrid method of a later release merges both)")
-        slots = len(self.scene.objects)
-        self.samplers = []
-        for m in w.materials:
-            aims = {o.slot: (w.target(o.material.aim.target), o.material.aim.share, o.material.aim.mode)
-                    for o in m.objects if o.material.aim is not None and o.material.aim.share > 0}
-            self.samplers.append(Aimed(m, aims, slots) if aims else m)
-        self._sampler = {id(m): s for m, s in zip(w.materials, self.samplers, strict=True)}
-        aims = {o.slot: (w.target(o.emission.aim.target), o.emission.aim.share, o.emission.aim.mode)
-                for o in self.lights.objects if o.emission.aim is not None and o.emission.aim.share > 0}
-        self.emission = Aimed(CosineEmission(), aims, slots)
+        self.particles = Particles(w)
         self.min_extent = float(self.eye.extent.min())
         #: Particles on the retina per particle emitted in the pilot (tracer.integrators.base).
         self.pilot_efficiency = 0.0
@@ -69,20 +103,10 @@ class ForwardTracer(Integrator, PathMethod):
 
     # -- emission --------------------------------------------------------------------------------
     def emit(self, rng: np.random.Generator, n: int, first: int = 0) -> PathState:
-        """n particles leaving the lights, numbered from ``first``: a state with flux weights
-        (cd/m^2 mm^2 sr); particles whose direction sample failed are dropped."""
-        lights = self.lights
-        tri, points, normal, pdf_pos = lights.sample_emission(rng.random((4, n)))
-        it = Interaction(-normal, points, normal, normal, None, lights.slot[tri])
-        s = self.emission.sample(it, rng.random((self.emission.dims, n), F32), IMPORTANCE)
-        beta = (np.take(lights.radiance, tri, axis=1) * (np.pi * s.weight / pdf_pos)).astype(F32)
-        alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
-        wo = np.take(s.wo, alive, axis=1)
-        o = self.world.accel.spawn(np.take(points, alive, axis=1), np.take(normal, alive, axis=1), wo)
-        pid = first + alive
-        self._record(pid, np.take(points, alive, axis=1), np.zeros(len(alive), bool))
-        return PathState(o, wo, np.take(beta, alive, axis=1), pid, pid % REPLICATES, s.pdf[alive],
-                         np.zeros(len(alive), bool))
+        """n particles leaving the lights, numbered from ``first`` (:meth:`Particles.emit`)."""
+        state, points = self.particles.emit(rng, n, first, REPLICATES)
+        self._record(state.owner, points, np.zeros(len(state), bool))
+        return state
 
     def run_batch(self, ctx):
         n = self.batch_size
@@ -120,7 +144,7 @@ class ForwardTracer(Integrator, PathMethod):
         return at
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
-        return continue_by_sampling(state, it, self._sampler[id(bsdf)], ctx, IMPORTANCE, nxt, sl)
+        return continue_by_sampling(state, it, self.particles.sampler(bsdf), ctx, IMPORTANCE, nxt, sl)
 
     def potential(self, beta):
         """The luminance a particle stands for as a sample of its pixel: landing, it adds at most its flux

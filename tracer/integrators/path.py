@@ -267,6 +267,8 @@ class Context:
     sample_found: np.ndarray | None = None
     #: The random stream of the probe of paths cut at max_depth (:func:`probe_cut`); None: no probe.
     probe_rng: np.random.Generator | None = None
+    #: The batch's index (methods whose parameters follow a schedule over batches: the photon radius).
+    batch: int = 0
 
 
 @dataclass

@@ -1,0 +1,471 @@
+"""Bidirectional stochastic ray tracing with visibility (photon) maps: the paper's method for a HUD with
+a diffuse screen (sec. 4.1, Figs. 4 and 7), where the eye sees the screen only through the collimating
+optics and the screen sees the LEDs only through the projection lens, the LCD and the condenser.
+
+A batch is ``REPLICATES`` independent replicates, each a complete estimate of the image:
+
+1. Photon pass. ``batch_size`` particles leave the lights (:class:`tracer.integrators.forward.Particles`,
+   with the emitters' and surfaces' aims) and run through the optics on the path loop; at every
+   non-specular vertex a photon is stored (position, arriving direction, flux, object, replicate =
+   particle index mod R). Photons are hashed into a grid of cells of side 2r (:class:`PhotonGrid`).
+2. Eye pass (the visibility maps). One sample through every pixel per replicate, traced from the
+   retina through the pupil along specular chains (splitting at glass as the backward method does)
+   to its first non-specular vertex, the visibility point, where the path ends.
+3. Gather. A visibility point x of replicate r takes the photons of replicate r within radius r_k on
+   the same object: L(x) = sum_p f(x, w_p, w_eye) Phi_p / (pi r_k^2 N_r), N_r the particles emitted for
+   the replicate (the density estimate of Jensen, "Realistic Image Synthesis Using Photon Mapping",
+   2001, eq. 7.6).
+
+The radius shrinks with the batch index k alone: r_k^2 = r_0^2 prod_{i=1..k} (i + alpha) / (i + 1), the
+schedule of probabilistic progressive photon mapping (Knaus and Zwicker 2011,
+doi:10.1145/1966394.1966404; the paper cites stochastic PPM, Hachisuka and Jensen 2009,
+doi:10.1145/1618452.1618487). Batches therefore stay independent replicates that merge exactly and run
+on worker processes and Dask like every other method; the estimate is consistent (its bias falls as
+r_k^2 ~ k^(alpha - 1)). r_0 is ``radius_mm``, or where that is 0 (the default) ``FOOTPRINT_RADII`` times the median
+distance between the visibility points of neighbouring pixels (the pixel's footprint on the screen),
+measured once per render on the pilot's stream.
+
+What each part counts, so that no light path is counted twice (tests/test_photon.py proves it):
+
+- ``hit``: emitters and the environment that eye paths meet along their specular chains;
+- ``connection``: light arriving at a visibility point straight from an emitter or the environment
+  (next-event estimation, full weight: the eye path ends there, so no hit competes with it);
+- ``photon``: light whose last segment before the visibility point leaves another surface (a lens, a
+  mirror, the LCD, a diffuse wall): photons are stored only after their first event.
+
+With ``next_event: false`` photons are stored from their first segment on and carry the direct light
+too (no connections). Photons leave the lights only: environment light that reaches a scattering
+surface after a bounce is not counted (a warning says so where the environment is lit).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
+from ..schema import Field
+from ..units import luminance3
+from ..vec import F32, dot
+from .backward import BackwardTracer
+from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
+from .forward import Particles
+from .path import Context, PathMethod, PathState, continue_by_sampling, trace
+
+#: Independent replicates per batch: eye passes over all pixels, each with its own share of photons.
+REPLICATES = 2
+#: The default initial radius: at least this many pixel footprints on the surface the eye sees...
+FOOTPRINT_RADII = 1.5
+#: ... and large enough that a visibility point in the light gathers about this many photons from a
+#: replicate of a default batch (DEFAULT_BATCH photons), ...
+TARGET_PHOTONS = 10.0
+#: ... but at most this many footprints (beyond it the image would blur more than it gains).
+MAX_FOOTPRINT_RADII = 12.0
+#: Photons count at a visibility point only on the same object with normals at most ~45 deg apart.
+MIN_NORMAL_COS = 0.7
+#: Candidate (point, photon) pairs examined at once (bounds the gather's memory: ~100 bytes each).
+GATHER_PAIRS = 1 << 20
+#: Photons (and eye samples) of the pilot that measures the photon density.
+PILOT_PHOTONS = 1 << 15
+#: Pixels sampled (on a grid) to measure the footprint.
+FOOTPRINT_PIXELS = 1 << 14
+#: The radius never falls below this fraction of r_0 (a guard; the schedule reaches it only after
+#: about 10^18 batches).
+MIN_RADIUS_FRACTION = 1e-3
+#: The ctx.store keys of the photon figures (summed over batches).
+STORE_KEYS = ("photons_emitted", "photons_stored", "visibility_points", "photons_gathered", "photon_paths_cut")
+
+
+def radius_schedule(r0: float, alpha: float, k: np.ndarray | int) -> np.ndarray | float:
+    """The gather radius (mm) of batch ``k`` (0-based): r_0 sqrt(prod_{i=1..k} (i + alpha) / (i + 1))
+    (Knaus and Zwicker 2011, eq. 15, with batch k+1 their pass), never below MIN_RADIUS_FRACTION r_0."""
+    k = np.asarray(k, np.float64)
+    log_ratio = (np.vectorize(math.lgamma)(k + 1 + alpha) - math.lgamma(1 + alpha)
+                 - np.vectorize(math.lgamma)(k + 2))
+    r = r0 * np.exp(0.5 * log_ratio)
+    out = np.maximum(r, MIN_RADIUS_FRACTION * r0)
+    return float(out) if out.ndim == 0 else out
+
+
+def _cell_hash(cell: np.ndarray, rep: np.ndarray) -> np.ndarray:
+    """64-bit keys of integer cells (3, n) and replicates (n,) (the primes of Teschner et al. 2003,
+    "Optimized spatial hashing for collision detection of deformable objects"). Two cells may share a
+    key; :meth:`PhotonGrid.pairs` compares the cells themselves, so a collision costs time only."""
+    c = cell.astype(np.int64).view(np.uint64)
+    with np.errstate(over="ignore"):
+        return ((c[0] * np.uint64(73856093)) ^ (c[1] * np.uint64(19349663)) ^ (c[2] * np.uint64(83492791))
+                ^ (rep.astype(np.uint64) * np.uint64(2654435761)))
+
+
+class PhotonGrid:
+    """Photons of one batch in a spatial hash grid of cells of side 2 ``radius`` (mm): the photons within
+    ``radius`` of any point lie in the 2 x 2 x 2 cells around it. Arrays are kept sorted by key:
+    p (3, n) mm float64, d (3, n) arriving directions, beta (3, n) flux (cd/m^2 mm^2 sr), slot (n,),
+    ng (3, n), rep (n,)."""
+
+    def __init__(self, p, d, beta, slot, ng, rep, radius: float):
+        self.radius = float(radius)
+        self.h = 2.0 * self.radius
+        self.origin = p.min(axis=1, keepdims=True) if p.shape[1] else np.zeros((3, 1))
+        cell = self._cell(p)
+        key = _cell_hash(cell, rep)
+        order = np.argsort(key, kind="stable")
+        self.keys = key[order]
+        t = lambda a: np.take(a, order, axis=-1)  # noqa: E731
+        self.p, self.d, self.beta, self.slot, self.ng, self.rep, self.cell = (
+            t(p), t(d), t(beta), t(slot), t(ng), t(rep), t(cell))
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def _cell(self, p: np.ndarray) -> np.ndarray:
+        return np.floor((p - self.origin) / self.h).astype(np.int64)
+
+    def candidates(self, x: np.ndarray, rep: np.ndarray):
+        """For points x (3, m) of replicates ``rep``: the 8 cells around each, (3, m, 8) and their
+        photon ranges [lo, hi) (m, 8)."""
+        base = np.floor((x - self.radius - self.origin) / self.h).astype(np.int64)
+        offs = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]).T  # (3, 8)
+        cells = base[:, :, None] + offs[:, None, :]
+        keys = _cell_hash(cells.reshape(3, -1), np.repeat(rep, 8)).reshape(-1, 8)
+        lo = np.searchsorted(self.keys, keys, side="left")
+        hi = np.searchsorted(self.keys, keys, side="right")
+        return cells, lo, hi
+
+    def pairs(self, x, ng, slot, rep, cells, lo, hi):
+        """(point index, photon index) of every photon of the same replicate and object within the
+        radius of points x (3, m) (normals ng, slots, replicates), whose normals agree; the candidate
+        ranges from :meth:`candidates`."""
+        counts = (hi - lo).reshape(-1)
+        total = int(counts.sum())
+        if total == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        which = np.repeat(np.arange(len(counts)), counts)  # (point, cell) pair of each candidate
+        first = np.cumsum(counts) - counts
+        ph = lo.reshape(-1)[which] + (np.arange(total) - first[which])
+        pt = which // 8
+        cell = cells.reshape(3, -1)[:, which]
+        ok = np.all(self.cell[:, ph] == cell, axis=0) & (self.rep[ph] == rep[pt]) & (self.slot[ph] == slot[pt])
+        pt, ph = pt[ok], ph[ok]
+        v = self.p[:, ph] - x[:, pt]
+        ok = (dot(v, v) <= self.radius * self.radius) & (dot(self.ng[:, ph], ng[:, pt]) >= MIN_NORMAL_COS)
+        return pt[ok], ph[ok]
+
+
+def concat_interactions(parts: list[Interaction]) -> Interaction:
+    """One interaction of several (their caches dropped)."""
+    if len(parts) == 1:
+        return parts[0]
+    c = lambda name: np.concatenate([getattr(i, name) for i in parts], axis=-1)  # noqa: E731
+    smooth = any(i.ns is not i.ng for i in parts)
+    ng = c("ng")
+    uv = c("uv") if all(i.uv is not None for i in parts) else None
+    offset = c("offset") if all(i.offset is not None for i in parts) else None
+    return Interaction(c("d"), c("p"), ng, c("ns") if smooth else ng, uv, c("slot"), offset)
+
+
+class PhotonPass(PathMethod):
+    """The photon pass's hooks on the path loop: particles carry flux (IMPORTANCE), and every
+    non-specular vertex they reach stores a photon (after the particle's first event, or from its
+    first segment on when direct light is left to the photons)."""
+
+    mode = IMPORTANCE
+
+    def __init__(self, particles: Particles, store_direct: bool):
+        self.particles = particles
+        self.store_direct = store_direct
+        self.stored: list[tuple] = []
+
+    def connect(self, state, it, bsdf, ctx):
+        keep = np.flatnonzero(state.extra["scattered"] | self.store_direct)
+        if len(keep):
+            t = lambda a: np.take(a, keep, axis=-1)  # noqa: E731
+            self.stored.append((t(it.p), t(it.d), t(state.beta), it.slot[keep], t(it.ng), state.rep[keep]))
+        return None
+
+    def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
+        out = continue_by_sampling(state, it, self.particles.sampler(bsdf), ctx, IMPORTANCE, nxt, sl)
+        nxt.extra["scattered"][sl] = True
+        return out
+
+
+@register
+class PhotonTracer(BackwardTracer):
+    name = "photon"
+    summary = ("retina -> specular chain -> visibility points, gathered from photons of the lights "
+               "(paper sec. 4.1, progressive radius)")
+    noise_advice = (", or raise methods.photon.radius_mm (less noise, more blur); where no scattering surface is "
+                    "in view, use the forward or backward method")
+    options = (MAX_DEPTH,
+               Field("next_event", "bool", True, label="Next-event estimation",
+                     description="Connect visibility points to the lights they see directly (off: photons carry "
+                                 "the direct light too)"),
+               Field("splits", "int", 3, minimum=0, maximum=8, label="Specular splits",
+                     description="At the first N glass surfaces or coatings of an eye path, follow both branches"),
+               Field("radius_mm", "number", 0.0, unit="mm", minimum=0.0, maximum=1e4, label="Initial radius",
+                     description="Gather radius of the first batch, mm; 0: automatic (1.5 pixel footprints on the "
+                                 "surface in view)"),
+               Field("alpha", "number", 2.0 / 3.0, unit="1", minimum=0.0, exclusive_min=True, maximum=1.0,
+                     label="Radius reduction",
+                     description="Knaus-Zwicker alpha: the radius^2 shrinks as batches^(alpha - 1); 1 keeps it"))
+    components = {"hit": "samples per pixel", "connection": "samples per pixel", "photon": "samples per pixel"}
+    mis_with_hits = False
+    efficiency_definition = ("retina samples that reached a source, connected to one or gathered a photon / "
+                             "samples")
+    found_what = "found light (a source, a connection or a photon)"
+
+    def __init__(self, world, seed, batch_size=None, options=None):
+        super().__init__(world, seed, batch_size, options)
+        self.alpha = float(self.opts["alpha"])
+        self.r0 = float(self.opts["radius_mm"]) or None  # None: measured by the pilot
+        self.radius_from = "methods.photon.radius_mm" if self.r0 is not None else None
+        w = self.world
+        can_emit = w.accel is not None and w.lights.total_flux_lm > 0
+        self.particles = Particles(w) if can_emit else None
+        self._vis: list[tuple] = []
+        self._footprint_pass = False
+        if not w.environment.is_black:
+            self.warnings.append("the photon method's photons leave the lights only: environment light that reaches "
+                                 "a scattering surface after a bounce is not counted (what the eye sees of the "
+                                 "environment through specular optics, and its direct light on scattering "
+                                 "surfaces, is)")
+
+    # -- the initial radius ------------------------------------------------------------------------
+    def footprint(self, rng: np.random.Generator) -> float:
+        """The pixel's footprint (mm) on the surfaces in view: the median distance between the
+        visibility points of neighbouring pixels, from rays through the pupil centre on a grid of
+        pixels; 0 where no two neighbours reach the same scattering surface."""
+        eye = self.eye
+        w, h = eye.width, eye.height
+        stride = max(1, int(math.ceil(math.sqrt(w * h / FOOTPRINT_PIXELS))))
+        xs, ys = np.arange(0, w, stride), np.arange(0, h, stride)
+        gx, gy = np.meshgrid(xs, ys)
+        pix = (gy * w + gx).reshape(-1)
+        n = len(pix)
+        sx = (2 * ((pix % w) + 0.5) / w - 1) * eye.half_x
+        sy = (1 - 2 * ((pix // w) + 0.5) / h) * eye.half_y
+        o, d, _ = eye.generate_rays(sx, sy, np.zeros((2, n)))
+        state = PathState(o, d, np.ones((3, n), F32), np.arange(n), np.zeros(n, np.int64), np.zeros(n),
+                          np.ones(n, bool), {"sample": np.arange(n), "splits": np.zeros(n, np.int8)})
+        from ..film import Splats
+        from .path import Timers
+        ctx = Context(self.world, rng, Timers(), Splats())
+        ctx.sample_found = np.zeros(n, bool)
+        self._vis, self._footprint_pass = [], True
+        try:
+            if self.world.accel is not None:
+                trace(self, state, ctx, self.max_depth, probe=False)
+        finally:
+            vis, self._vis, self._footprint_pass = self._vis, [], False
+        point = np.full((3, n), np.nan)
+        slot = np.full(n, -1)
+        best = np.full(n, -1.0)
+        for it, beta, owner, _rep, _sample, _bsdf in vis:
+            y = luminance3(beta)
+            order = np.argsort(y, kind="stable")  # the brightest branch of each grid pixel is written last
+            own, yy = owner[order], y[order]
+            better = yy > best[own]
+            own_b = own[better]
+            point[:, own_b] = np.take(it.p, order[better], axis=1)
+            slot[own_b] = it.slot[order[better]]
+            best[own_b] = yy[better]
+        grid_point = point.reshape(3, len(ys), len(xs))
+        grid_slot = slot.reshape(len(ys), len(xs))
+        gaps = []
+        for a, b, sa, sb in ((grid_point[:, :, 1:], grid_point[:, :, :-1], grid_slot[:, 1:], grid_slot[:, :-1]),
+                             (grid_point[:, 1:, :], grid_point[:, :-1, :], grid_slot[1:, :], grid_slot[:-1, :])):
+            same = (sa == sb) & (sa >= 0)
+            gaps.append(np.sqrt(((a - b) ** 2).sum(axis=0))[same])
+        gaps = np.concatenate(gaps) / stride
+        gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
+        return float(np.median(gaps)) if len(gaps) else 0.0
+
+    def initial_radius(self, rng: np.random.Generator) -> float:
+        """r_0 (mm) where ``radius_mm`` is 0: FOOTPRINT_RADII pixel footprints, widened so that a lit
+        visibility point of a default batch's replicate gathers about TARGET_PHOTONS photons (from a
+        pilot photon pass gathered at the footprint radius), at most MAX_FOOTPRINT_RADII footprints. A
+        scene whose scattering surfaces no two neighbouring pixels see gets 1e-3 of its extent."""
+        r_fp = FOOTPRINT_RADII * self.footprint(rng)
+        if r_fp <= 0:
+            extent = self.world.accel.extent if self.world.accel is not None else 1.0
+            self.radius_from = "1e-3 of the scene's extent (no scattering surface on the footprint grid)"
+            return float(1e-3 * max(extent, 1e-3))
+        from ..film import Splats
+        from .path import Timers
+        n = PILOT_PHOTONS
+        ctx = Context(self.world, rng, Timers(), Splats())
+        counts = []
+        self._batch(ctx, rng.integers(0, self.npix, n), np.zeros(n, np.int64), 1, n, r_fp, counts)
+        counts = np.concatenate(counts) if counts else np.zeros(0)
+        lit = counts[counts > 0]
+        self.radius_from = f"{FOOTPRINT_RADII} x the median pixel footprint on the surfaces in view"
+        if len(lit) == 0:
+            return r_fp
+        per_batch = lit.mean() * (DEFAULT_BATCH / REPLICATES) / n  # photons within r_fp per replicate
+        r = r_fp * math.sqrt(TARGET_PHOTONS / per_batch)
+        if r <= r_fp:
+            return r_fp
+        if r >= MAX_FOOTPRINT_RADII / FOOTPRINT_RADII * r_fp:
+            self.radius_from = f"{MAX_FOOTPRINT_RADII} pixel footprints (the most; few photons reach the surface)"
+            return MAX_FOOTPRINT_RADII / FOOTPRINT_RADII * r_fp
+        self.radius_from = f"{TARGET_PHOTONS:g} photons per lit visibility point and replicate of a default batch"
+        return float(r)
+
+    def fit_batch(self, budget):
+        """Batches keep their photon count (the gather radius was chosen for it); only the pilot runs."""
+        self.reference_luminance  # noqa: B018
+
+    def radius(self, batch: int) -> float:
+        return radius_schedule(self.r0, self.alpha, batch)
+
+    # -- the batch ---------------------------------------------------------------------------------
+    def _photons(self, ctx, n: int, replicates: int, radius: float) -> PhotonGrid | None:
+        """The photon pass: n particles dealt into ``replicates``; their photons in a grid."""
+        if self.particles is None or n == 0:
+            return None
+        pp = PhotonPass(self.particles, store_direct=not self.next_event)
+        pctx = Context(self.world, ctx.rng, ctx.timers)
+        cut = 0
+        for a in range(0, n, WAVE):
+            state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
+            state.extra["scattered"] = np.zeros(len(state), bool)
+            cut += trace(pp, state, pctx, self.max_depth, probe=False)
+        ctx.store["photons_emitted"] = ctx.store.get("photons_emitted", 0) + n
+        ctx.store["photon_paths_cut"] = ctx.store.get("photon_paths_cut", 0) + cut
+        if not pp.stored:
+            return None
+        arrays = [np.concatenate(parts, axis=-1) for parts in zip(*pp.stored, strict=True)]
+        ctx.store["photons_stored"] = ctx.store.get("photons_stored", 0) + arrays[0].shape[1]
+        return PhotonGrid(*arrays, radius)
+
+    def _gather(self, ctx, grid: PhotonGrid | None, vis: list[tuple], per_replicate: np.ndarray,
+                counts: list | None = None):
+        """Density estimates at the visibility points ``vis`` into the "photon" component; with
+        ``counts``, the number of photons each point gathered is appended to it."""
+        if grid is None or not len(grid):
+            return
+        r2pi = math.pi * grid.radius * grid.radius
+        by_material: dict[int, list] = {}
+        for entry in vis:
+            by_material.setdefault(id(entry[5]), []).append(entry)
+        for entries in by_material.values():
+            bsdf = entries[0][5]
+            it = concat_interactions([e[0] for e in entries])
+            beta = np.concatenate([e[1] for e in entries], axis=1)
+            owner, rep, sample = (np.concatenate([e[k] for e in entries]) for k in (2, 3, 4))
+            cells, lo, hi = grid.candidates(it.p, rep)
+            per_point = np.cumsum((hi - lo).sum(axis=1))
+            gathered = np.zeros((3, len(it)))
+            per_point_found = np.zeros(len(it), np.int64)
+            start, gathered_pairs = 0, 0
+            while start < len(it):
+                done = per_point[start - 1] if start else 0
+                end = int(np.searchsorted(per_point, done + GATHER_PAIRS, side="right"))
+                end = min(max(end, start + 1), len(it))
+                sl = slice(start, end)
+                pt, ph = grid.pairs(it.p[:, sl], it.ng[:, sl], it.slot[sl], rep[sl], cells[:, sl], lo[sl], hi[sl])
+                start = end
+                if len(pt) == 0:
+                    continue
+                pt = pt + sl.start
+                gathered_pairs += len(pt)
+                sub = it.take(pt)
+                d_ph = grid.d[:, ph]
+                cos = np.abs(dot(d_ph, sub.ng))
+                fcos = bsdf.eval(sub, -d_ph, RADIANCE)
+                f = np.divide(fcos, cos, out=np.zeros(fcos.shape, np.float64), where=cos > 0)
+                contrib = f * grid.beta[:, ph]
+                for c in range(3):
+                    gathered[c] += np.bincount(pt, weights=contrib[c], minlength=len(it))
+                per_point_found += np.bincount(pt, minlength=len(it))
+            ctx.store["photons_gathered"] = ctx.store.get("photons_gathered", 0) + gathered_pairs
+            if counts is not None:
+                counts.append(per_point_found)
+            value = beta * gathered / (r2pi * per_replicate[rep])
+            self._add(ctx, "photon", owner, rep, sample, value)
+
+    def _batch(self, ctx, pix: np.ndarray, rep: np.ndarray, replicates: int, photons: int, radius: float,
+               counts: list | None = None) -> int:
+        """Photons gathered at ``radius`` (mm), then eye samples through ``pix`` (replicates ``rep``)
+        gathered wave by wave; the samples that found light."""
+        grid = self._photons(ctx, photons, replicates, radius)
+        per_replicate = np.array([len(range(r, photons, replicates)) for r in range(replicates)], np.float64)
+        ctx.sample_found = np.zeros(len(pix), bool)
+        for a in range(0, len(pix), WAVE):
+            b = min(a + WAVE, len(pix))
+            self._vis = []
+            state = self.camera_paths(ctx.rng, pix[a:b], rep[a:b], a)
+            self.truncated += trace(self, state, ctx, self.max_depth)
+            ctx.store["visibility_points"] = ctx.store.get("visibility_points", 0) + sum(len(v[2]) for v in self._vis)
+            with ctx.timers("film"):
+                self._gather(ctx, grid, self._vis, np.maximum(per_replicate, 1), counts)
+            self._vis = []
+        return int(ctx.sample_found.sum())
+
+    def run_batch(self, ctx):
+        if self.r0 is None:
+            self.reference_luminance  # noqa: B018  (the pilot sets r_0)
+        pix = np.tile(np.arange(self.npix), REPLICATES)
+        rep = np.repeat(np.arange(REPLICATES), self.npix)
+        found = self._batch(ctx, pix, rep, REPLICATES, self.batch_size, self.radius(ctx.batch))
+        norms = dict.fromkeys(self.components, REPLICATES)
+        return len(pix), found, norms, REPLICATES
+
+    def pilot_mean(self, ctx) -> float:
+        """r_0 (from the footprint, on the pilot's stream), then the image's mean luminance (cd/m^2) from
+        ``batch_size`` photons gathered at as many random pixels, at radius r_0."""
+        if self.r0 is None:
+            self.r0 = self.initial_radius(ctx.rng)
+        n = self.batch_size
+        pix = ctx.rng.integers(0, self.npix, n)
+        self._batch(ctx, pix, np.zeros(n, np.int64), 1, n, self.r0)
+        total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)
+        return total / n
+
+    # -- hooks of the path loop (eye pass) ---------------------------------------------------------
+    def connect(self, state, it, bsdf, ctx):
+        """A visibility point: kept for the gather, and connected to the lights (next-event estimation)."""
+        self._vis.append((it, state.beta, state.owner, state.rep, state.extra["sample"], bsdf))
+        return None if self._footprint_pass else super().connect(state, it, bsdf, ctx)
+
+    def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
+        """Specular surfaces continue the eye path (with the backward method's splits); the first
+        scattering surface ends it."""
+        if not bsdf.delta:
+            return []
+        return super().continue_paths(state, it, bsdf, ctx, nxt, sl)
+
+    # -- the report --------------------------------------------------------------------------------
+    def finish(self, result):
+        figures = {k: int(result.extra.pop(k, 0)) for k in STORE_KEYS}
+        super().finish(result)
+        result.extra.pop("exit_pupil", None)
+        batches = max(result.batches, 1)
+        r0 = self.r0 if self.r0 is not None else 0.0
+        vis = figures["visibility_points"]
+        result.extra["photon"] = {
+            "replicates_per_batch": REPLICATES,
+            "initial_radius_mm": r0,
+            "initial_radius_from": self.radius_from,
+            "alpha": self.alpha,
+            "final_radius_mm": radius_schedule(r0, self.alpha, batches - 1) if r0 else 0.0,
+            "photons_emitted": figures["photons_emitted"],
+            "photons_stored": figures["photons_stored"],
+            "photon_paths_cut_at_max_depth": figures["photon_paths_cut"],
+            "visibility_points": vis,
+            "photons_per_visibility_point": figures["photons_gathered"] / vis if vis else 0.0,
+        }
+        film = result.film
+        total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)
+        result.extra["component_shares"] = {
+            c: (float(luminance3(film.sums[c]).sum()) / total if total > 0 else 0.0) for c in self.components}
+        if vis == 0 and result.paths:
+            result.warnings.append(
+                f"no eye path reached a scattering (non-specular) surface in {result.paths:,} samples: the photon maps "
+                f"were never used (efficiency {result.efficiency:.3g}); the image holds only the sources and "
+                "environment seen through specular optics: use the forward or backward method")
+        elif figures["photons_stored"] == 0 and result.paths:
+            result.warnings.append(
+                f"no photon reached a scattering surface ({figures['photons_emitted']:,} emitted): only direct light "
+                "(connections) lights the surfaces in view")
