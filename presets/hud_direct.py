@@ -111,9 +111,33 @@ def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tu
     return q + s[:, None] * normal, f
 
 
-def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
+#: hud-direct-condenser: a plano-convex condenser (convex face toward the scatterer) CONDENSER_GAP mm
+#: in front of the design LED point F2 forms a virtual image of the LEDs at F2, so that the mirror
+#: still images them onto the eyebox; the real LEDs sit closer, u = f c / (f + c), on a grid shrunk
+#: by the condenser's magnification c / u, so their images tile the eyebox as before.
+CONDENSER = {"r": 21.0, "thickness": 9.0, "semi_diameter": 16.0, "ior": 1.52}
+CONDENSER_GAP = 20.0
+
+
+def condenser_layout() -> dict:
+    """Where the condenser and the LEDs of hud-direct-condenser go: distances (mm) toward the mirror
+    from the design LED point F2, the condenser's focal length and its magnification."""
+    from ._build import lens_focal_length
+
+    c = CONDENSER
+    f = lens_focal_length(c["r"], 0.0, c["thickness"], c["ior"])
+    # Light enters the flat face and leaves the convex one: the principal planes lie t / n inside the
+    # flat face (object side) and at the convex vertex (image side) (Hecht, Optics, sec. 6.1).
+    gap = CONDENSER_GAP
+    u = f * gap / (f + gap)
+    h_object = gap - (c["thickness"] - c["thickness"] / c["ior"])
+    return {"f": f, "vertex": gap, "center": gap - 0.5 * c["thickness"], "led": h_object - u, "magnification": gap / u}
+
+
+def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: bool = False, name: str = NAME,
+          summary: str = SUMMARY) -> Path:
     d = design()
-    sb = SceneBuilder(Path(folder), NAME, SUMMARY)
+    sb = SceneBuilder(Path(folder), name, summary)
     x_axis = np.array([1.0, 0.0, 0.0])
     r2 = d["r2"]
     # Windshield: a glass slab whose inner face passes through the windshield point.
@@ -158,20 +182,34 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION) -> Path:
     sb.add("pupil_image", disk(pupil_image_r + ghost_shift + 0.2, 64), {"type": "aperture"},
            frame_matrix(d["led"] + ghost_shift * across - 0.01 * r2, x_axis, -r2))
     # LED dies facing the scatterer, aimed at it: a grid centred on the design LED position, so that
-    # their images tile the eyebox.
-    across = np.cross(x_axis, r2)
+    # their images tile the eyebox. With a condenser, the dies sit closer on a smaller grid (its virtual
+    # image is the design grid) and aim at the condenser's flat face.
+    led_center, pitch_scale, aim = d["led"], 1.0, {"target": "scatterer", "share": 0.95}
+    if condenser:
+        lay = condenser_layout()
+        c = CONDENSER
+        from ._build import lens
+
+        sb.add("condenser", lens(c["r"], 0.0, c["thickness"], c["semi_diameter"]), {"type": "dielectric",
+                                                                                   "ior": c["ior"]},
+               frame_matrix(d["led"] - lay["center"] * r2, x_axis, -r2), smooth=True)
+        flat = d["led"] - (lay["center"] - 0.5 * c["thickness"] - 0.05) * r2
+        sb.add("condenser_aperture", disk(c["semi_diameter"], 64), {"type": "aperture"},
+               frame_matrix(flat, x_axis, -r2))
+        led_center, pitch_scale = d["led"] - lay["led"] * r2, 1.0 / lay["magnification"]
+        aim = {"target": "condenser_aperture", "share": 0.95}
     k = 0
     for row in range(LED_GRID[1]):
         for col in range(LED_GRID[0]):
-            offset = ((col - (LED_GRID[0] - 1) / 2) * LED_PITCH[0] * x_axis
-                      + (row - (LED_GRID[1] - 1) / 2) * LED_PITCH[1] * across)
+            offset = pitch_scale * ((col - (LED_GRID[0] - 1) / 2) * LED_PITCH[0] * x_axis
+                                    + (row - (LED_GRID[1] - 1) / 2) * LED_PITCH[1] * across)
             lv, lf, _ = rectangle(0.2, 0.2)
-            sb.add(f"led_{k}", (lv, lf), {"type": "absorber"}, frame_matrix(d["led"] + offset, x_axis, -r2),
-                   emission={"luminance": LED_LUMINANCE, "aim": {"target": "scatterer", "share": 0.95}})
+            sb.add(f"led_{k}", (lv, lf), {"type": "absorber"}, frame_matrix(led_center + offset, x_axis, -r2),
+                   emission={"luminance": LED_LUMINANCE, "aim": dict(aim)})
             k += 1
     # Housing below the LED so that nothing escapes backward into the view.
     hv, hf, _ = rectangle(60.0, 40.0)
-    sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(d["led"] + 1.0 * r2, x_axis, -r2))
+    sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(led_center + 1.0 * r2, x_axis, -r2))
     eye = d["eye"]
     return sb.write(
         eye={"position": eye.tolist(), "gaze": d["gaze"].tolist(), "up": [0.0, 0.0, 1.0],

@@ -34,8 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ._build import SceneBuilder, box, disk, frame_matrix, lens, lens_focal_length, rectangle
-from .hud_direct import (GLASS_MM, LED_TO_MIRROR, MIRROR_R, PUPIL_MM, RESOLUTION, VID, VIEW_DEG, design,
-                         ellipsoid_patch)
+from .hud_direct import GLASS_MM, LED_TO_MIRROR, MIRROR_R, PUPIL_MM, RESOLUTION, VID, VIEW_DEG, design, ellipsoid_patch
 from .slide import slide_image
 
 NAME = "hud-screen"
@@ -72,7 +71,8 @@ def optics() -> dict:
     lcd_at = lens_at + f_p * (1 + 1 / MAGNIFICATION) + inset
     condenser_at = lcd_at + LCD_TO_CONDENSER + 0.5 * CONDENSER["thickness"]
     f_c = lens_focal_length(CONDENSER["r"], 0.0, CONDENSER["thickness"], IOR)
-    collimator_at = condenser_at + 0.5 * CONDENSER["thickness"] + CONDENSER_TO_COLLIMATOR + 0.5 * COLLIMATOR["thickness"]
+    collimator_at = (condenser_at + 0.5 * CONDENSER["thickness"] + CONDENSER_TO_COLLIMATOR
+                     + 0.5 * COLLIMATOR["thickness"])
     f_l = lens_focal_length(COLLIMATOR["r"], 0.0, COLLIMATOR["thickness"], IOR)
     # The LEDs at the collimator's back focus: f behind its convex vertex's principal plane, which for a
     # plano-convex lens lies at the convex vertex (Hecht, Optics, sec. 6.1): f - t / n from the flat face.

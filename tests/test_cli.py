@@ -22,9 +22,11 @@ def test_presets_listed_and_exported(tmp_path):
     out = hud_trace("presets")
     assert out.returncode == 0
     names = [line.split()[0] for line in out.stdout.splitlines()]
-    assert names == ["hud-direct", "analytic-mirror", "analytic-disk", "analytic-furnace"]
-    assert hud_trace("export", "hud-direct", tmp_path / "s").returncode == 0
-    assert (tmp_path / "s" / "scene.json").is_file() and (tmp_path / "s" / "textures" / "slide.png").is_file()
+    assert names == ["hud-direct", "hud-screen", "hud-direct-condenser", "analytic-mirror", "analytic-disk",
+                     "analytic-furnace"]
+    for name in ("hud-direct", "hud-screen", "hud-direct-condenser"):
+        assert hud_trace("export", name, tmp_path / name).returncode == 0
+        assert (tmp_path / name / "scene.json").is_file() and (tmp_path / name / "textures" / "slide.png").is_file()
 
 
 def test_render_hud_direct_writes_image_preview_report(tmp_path):

@@ -46,6 +46,11 @@ class Film:
         self.rep_sq = np.zeros(n)  # sum over replicates of Y(m_r)^2
         self.comp_rep_sum = {name: np.zeros(n) for name in components}  # per component, for its own error
         self.comp_rep_sq = {name: np.zeros(n) for name in components}
+        #: Sums over replicates of each replicate's image mean of Y, and of its square: the mean's own
+        #: error, honest where an estimator correlates neighbouring pixels (a photon gather's disk
+        #: spans several of them).
+        self.mean_rep_sum = 0.0
+        self.mean_rep_sq = 0.0
         self.replicates = 0
 
     @property
@@ -72,6 +77,9 @@ class Film:
         if total is not None:
             self.rep_sum += total.sum(axis=0)
             self.rep_sq += (total * total).sum(axis=0)
+            means = total.mean(axis=1)
+            self.mean_rep_sum += float(means.sum())
+            self.mean_rep_sq += float((means * means).sum())
         self.replicates += replicates
 
     # -- merging ---------------------------------------------------------------------------------
@@ -79,10 +87,13 @@ class Film:
         """Everything a batch contributes, as plain arrays and numbers (what workers send back)."""
         names = list(self.kinds)
         return (names, [self.sums[k] for k in names], [self.norm[k] for k in names], self.rep_sum, self.rep_sq,
-                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names], self.replicates)
+                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names], self.replicates,
+                self.mean_rep_sum, self.mean_rep_sq)
 
     def merge_arrays(self, data: tuple):
-        names, sums, norms, rep_sum, rep_sq, c_sum, c_sq, replicates = data
+        names, sums, norms, rep_sum, rep_sq, c_sum, c_sq, replicates, mean_sum, mean_sq = data
+        self.mean_rep_sum += mean_sum
+        self.mean_rep_sq += mean_sq
         for i, k in enumerate(names):
             self.sums[k] += sums[i]
             self.norm[k] += norms[i]
@@ -120,6 +131,15 @@ class Film:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
         (zeros before two replicates exist)."""
         return self._variance(self.rep_sum, self.rep_sq)
+
+    def mean_standard_error(self) -> float:
+        """Standard error (cd/m^2) of the image's mean luminance, from the spread of the replicates'
+        image means (0 before two replicates exist)."""
+        r = self.replicates
+        if r < 2:
+            return 0.0
+        mean = self.mean_rep_sum / r
+        return float(np.sqrt(max(self.mean_rep_sq / r - mean * mean, 0.0) / (r - 1)))
 
     def component_variance_y(self, name: str) -> np.ndarray:
         return self._variance(self.comp_rep_sum[name], self.comp_rep_sq[name])

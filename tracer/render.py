@@ -22,6 +22,7 @@ import numpy as np
 from . import __version__
 from .analysis import specular_paths
 from .errors import EstimateOverflowError
+from .hudfigures import hud_figures
 from .imageio import read_exr_channels, read_image, write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .outputs import OutputFile, OutputSet
@@ -289,7 +290,7 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "efficiency_definition": efficiency_definition,
         "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
                       "log_average": log_average_luminance(y),
-                      "mean_standard_error": float(math.sqrt(var_y.sum()) / y.size)},
+                      "mean_standard_error": result.film.mean_standard_error()},
         "components": components_report(result),
         "replicates": result.film.replicates,
         "stage_seconds": result.stages,
@@ -392,12 +393,14 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
             raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
         y = luminance(image)
         preview, info = tonemap_ward(image, adaptation_luminance(y))
-        analysis = None
+        analysis = figures = None
         if analyse and world.accel is not None and not result.partial:
             t0 = time.perf_counter()
             analysis = brightness_theorem(world, y, var_y, INTEGRATORS[method].renders_environment)
             analysis["seconds"] = time.perf_counter() - t0  # after the budget: not part of it
+            figures = hud_figures(world, y)
         report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
+        report["hud"] = figures
         run_id = uuid.uuid4().hex
         report = {"run_id": run_id} | report
         attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),

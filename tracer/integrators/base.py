@@ -298,7 +298,7 @@ class Integrator:
         npix = film.width * film.height
         missing = sum(v / film.norm[c] for c, v in sums.items() if film.norm.get(c)) / npix
         mean = float(luminance(film.rgb()).mean())
-        se = math.sqrt(float(film.variance_y().sum())) / npix
+        se = film.mean_standard_error()
         result.extra["max_depth_cut"] = {
             "paths": int(cut), "probe_segments": PROBE_DEPTH,
             "missing_luminance_cd_m2": missing, "missing_share_of_mean": missing / mean if mean > 0 else None,

@@ -68,6 +68,8 @@ MIN_NORMAL_COS = 0.7
 GATHER_PAIRS = 1 << 20
 #: Photons (and eye samples) of the pilot that measures the photon density.
 PILOT_PHOTONS = 1 << 15
+#: The pilots' eye samples: as many as their photons, at most this many per pixel.
+PILOT_SAMPLES_PER_PIXEL = 4
 #: Pixels sampled (on a grid) to measure the footprint.
 FOOTPRINT_PIXELS = 1 << 14
 #: The radius never falls below this fraction of r_0 (a guard; the schedule reaches it only after
@@ -294,9 +296,10 @@ class PhotonTracer(BackwardTracer):
         from ..film import Splats
         from .path import Timers
         n = PILOT_PHOTONS
+        k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
         ctx = Context(self.world, rng, Timers(), Splats())
         counts = []
-        self._batch(ctx, rng.integers(0, self.npix, n), np.zeros(n, np.int64), 1, n, r_fp, counts)
+        self._batch(ctx, rng.integers(0, self.npix, k), np.zeros(k, np.int64), 1, n, r_fp, counts)
         counts = np.concatenate(counts) if counts else np.zeros(0)
         lit = counts[counts > 0]
         self.radius_from = f"{FOOTPRINT_RADII} x the median pixel footprint on the surfaces in view"
@@ -418,10 +421,11 @@ class PhotonTracer(BackwardTracer):
         if self.r0 is None:
             self.r0 = self.initial_radius(ctx.rng)
         n = self.batch_size
-        pix = ctx.rng.integers(0, self.npix, n)
-        self._batch(ctx, pix, np.zeros(n, np.int64), 1, n, self.r0)
+        k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
+        pix = ctx.rng.integers(0, self.npix, k)
+        self._batch(ctx, pix, np.zeros(k, np.int64), 1, n, self.r0)
         total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)
-        return total / n
+        return total / k
 
     # -- hooks of the path loop (eye pass) ---------------------------------------------------------
     def connect(self, state, it, bsdf, ctx):

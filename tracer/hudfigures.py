@@ -1,0 +1,163 @@
+"""The figures an HUD engineer reads off an image: symbol luminance, the background behind the symbols,
+the rear-projection spot, and the contrast ratio (paper sec. 4.1: the spot "seriously worsens the
+conditions for observing the real environment"; the LED luminance is chosen for "the minimum possible
+contrast" of the spot and the "maximum contrast" of the symbols).
+
+The display region is where the eye's chief rays reach the display through its specular optics (the
+dominant chain of :func:`tracer.analysis.specular_paths`: through the LCD, or ending on the screen),
+eroded by one analysis cell. Inside it, pixels split by the modes of their log luminance (Otsu's
+threshold, Otsu 1979, doi:10.1109/TSMC.1979.4310076, for three classes, with classes whose means
+lie within a decade merged): an LCD's clear and black cells differ by its contrast ratio, two well
+separated modes; a third, darker mode (a screen's margin that the LCD's image does not reach) is
+left out as unlit. The split does not depend on the method, so every method
+is judged on one table.
+
+- ``symbol_cd_m2``, ``background_cd_m2``: means over the symbol pixels eroded by one pixel and the
+  background pixels eroded by BACKGROUND_EROSION (edges blurred by the pupil and the photon gather
+  are left out);
+- ``contrast_ratio``: CR = (L_sym + L_bg) / L_bg (the paper's and ISO 15008's form);
+- ``spot``: the background smoothed over a window of ``SPOT_WINDOW`` of the display's width (a
+  normalised box filter over background pixels only): its peak (cd/m^2), the peak over the
+  background's median, and its size: the solid angle where the smoothed background exceeds half its
+  peak, as the diameter (deg) of a disk of equal solid angle.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .analysis import specular_paths
+
+#: Window of the spot's smoothing, as a share of the display's width in pixels.
+SPOT_WINDOW = 0.08
+#: Pixels of erosion of the background (from the symbols' edges and the display's).
+BACKGROUND_EROSION = 3
+#: Log-luminance histogram bins for Otsu's threshold.
+BINS = 256
+
+
+def _erode(mask: np.ndarray) -> np.ndarray:
+    out = mask.copy()
+    out[1:, :] &= mask[:-1, :]
+    out[:-1, :] &= mask[1:, :]
+    out[:, 1:] &= mask[:, :-1]
+    out[:, :-1] &= mask[:, 1:]
+    return out
+
+
+def log_modes(logv: np.ndarray) -> list[float]:
+    """Thresholds (log10 cd/m^2) between the modes of log luminances ``logv``: the three-class Otsu
+    split (exhaustive over the histogram's pairs of bins), with neighbouring classes whose means lie
+    within a decade merged; [] for one mode, [t] for two, [t_low, t_high] for three."""
+    hist, edges = np.histogram(logv, BINS)
+    p = hist / max(hist.sum(), 1)
+    c = 0.5 * (edges[1:] + edges[:-1])
+    w = np.concatenate([[0.0], np.cumsum(p)])
+    m = np.concatenate([[0.0], np.cumsum(p * c)])
+    i, j = np.triu_indices(BINS + 1, 1)
+    keep = (i > 0) & (j < BINS)
+    i, j = i[keep], j[keep]
+    w0, w1, w2 = w[i], w[j] - w[i], 1 - w[j]
+    m0, m1, m2 = m[i], m[j] - m[i], m[-1] - m[j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = np.where((w0 > 0) & (w1 > 0) & (w2 > 0), m0 * m0 / w0 + m1 * m1 / w1 + m2 * m2 / w2, -np.inf)
+    k = int(np.argmax(score))
+    cuts = [float(edges[i[k]]), float(edges[j[k]])]
+    while cuts:
+        bounds = [-np.inf, *cuts, np.inf]
+        means = [logv[(logv >= a) & (logv < b)].mean() for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        gaps = np.diff(means)
+        if gaps.min() >= 1.0:
+            break
+        cuts.pop(int(np.argmin(gaps)))
+    return cuts
+
+
+def _box_mean(values: np.ndarray, weights: np.ndarray, k: int) -> np.ndarray:
+    """Normalised box filter of half-width k: sum(values w) / sum(w) over each (2k+1)^2 window."""
+    def box(a):
+        c = np.cumsum(np.cumsum(np.pad(a, ((k + 1, k), (k + 1, k))), axis=0), axis=1)
+        n = 2 * k + 1
+        return c[n:, n:] - c[:-n, n:] - c[n:, :-n] + c[:-n, :-n]
+    num, den = box(values * weights), box(weights)
+    return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+
+
+def display_mask(world) -> np.ndarray | None:
+    """(H, W) bool: pixels whose chief ray reaches the display along the dominant specular chain (the
+    one through the LCD, else the brightest), eroded by one analysis cell; None where no chain does."""
+    res = specular_paths(world, environment=False)
+    paths = res["paths"]
+    if not paths:
+        return None
+    through_lcd = [p for p in paths if np.any(np.isfinite(p["lcd"]))]
+    main = (through_lcd or paths)[0]
+    gh, gw = res["grid"]
+    grid = np.zeros(gh * gw, bool)
+    grid[main["pixel"]] = True
+    grid = _erode(grid.reshape(gh, gw))
+    s = res["stride"]
+    eye = world.eye
+    full = np.kron(grid, np.ones((s, s), bool))
+    out = np.zeros((eye.height, eye.width), bool)
+    # grid cell (j, i) is centred on pixel (j s + s // 2, i s + s // 2): cells span [j s, j s + s)
+    h, w = min(full.shape[0], eye.height), min(full.shape[1], eye.width)
+    out[:h, :w] = full[:h, :w]
+    return out
+
+
+def hud_figures(world, y: np.ndarray) -> dict | None:
+    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye; None
+    where the eye sees no display."""
+    mask = display_mask(world)
+    if mask is None or mask.sum() < 16:
+        return None
+    eye = world.eye
+    vals = y[mask]
+    pos = vals[vals > 0]
+    out: dict = {"display_pixels": int(mask.sum())}
+    if len(pos) < 16:
+        out["note"] = "the display region is dark"
+        return out
+    logv = np.log10(pos)
+    cuts = log_modes(logv)
+    if not cuts:
+        out["note"] = "the display is uniform (no symbols and background to tell apart)"
+        out["display_cd_m2"] = float(vals.mean())
+        return out
+    t = 10 ** cuts[-1]
+    sym = mask & (y >= t)
+    bg = mask & (y < t)
+    if len(cuts) == 2:
+        unlit = bg & (y < 10 ** cuts[0])
+        out["unlit_pixels"] = int(unlit.sum())
+        bg &= ~unlit
+    # Symbols eroded by one pixel; the background by BACKGROUND_EROSION, away from the halo that the
+    # pupil's blur and a photon gather's radius spread around every symbol.
+    sym_in, bg_in = _erode(sym), bg
+    for _ in range(BACKGROUND_EROSION):
+        bg_in = _erode(bg_in)
+    l_sym = float(y[sym_in].mean()) if sym_in.any() else float(y[sym].mean())
+    l_bg = float(y[bg_in].mean()) if bg_in.any() else (float(y[bg].mean()) if bg.any() else 0.0)
+    out |= {"threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
+            "symbol_cd_m2": l_sym, "background_cd_m2": l_bg,
+            "contrast_ratio": (l_sym + l_bg) / l_bg if l_bg > 0 else None}
+    if bg_in.sum() >= 16 and l_bg > 0:
+        bg = bg_in
+        cols = np.flatnonzero(mask.any(axis=0))
+        k = max(1, int(round(SPOT_WINDOW * (cols[-1] - cols[0] + 1) / 2)))
+        smooth = _box_mean(np.where(bg, y, 0.0), bg.astype(np.float64), k)
+        smooth = np.where(bg, smooth, 0.0)
+        peak = float(smooth.max())
+        at = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
+        half = bg & (smooth >= 0.5 * peak)
+        px_sr = (2 * eye.half_x / eye.focal / eye.width) * (2 * eye.half_y / eye.focal / eye.height)
+        diameter = 2 * math.degrees(math.sqrt(half.sum() * px_sr / math.pi))
+        median = float(np.median(y[bg]))
+        out["spot"] = {"peak_cd_m2": peak, "peak_pixel": [int(at[1]), int(at[0])],
+                       "peak_over_median_background": peak / median if median > 0 else None,
+                       "peak_over_symbol": peak / l_sym if l_sym > 0 else None,
+                       "half_peak_diameter_deg": diameter, "smoothing_px": 2 * k + 1}
+    return out
