@@ -3,12 +3,14 @@
     .venv/bin/python benchmarks/convergence.py [--presets P ...] [--budgets 1 2 4 8 16] [--ref-seconds 120]
 
 For each preset a high-sample reference image is rendered once and cached by scene hash in
-benchmarks/cache/ (not committed): backward tracing with next-event estimation, the best method for
-every preset here, seed 1000 and up, on every core, for --ref-seconds (the analytic scenes get a third
-of it). Then every method variant (forward; backward with next-event estimation; backward without it,
-the paper's plain method: benchmarks/throughput.py's VARIANTS) renders at each budget in seconds (one
-process, seed = budget index), and the script records wall time, rays, the method's own efficiency,
-the relative RMSE
+benchmarks/cache/ (not committed): backward tracing with next-event estimation, the best unbiased
+method where the scattering surfaces see the LEDs directly, or the photon method where they see them
+only through glass (hud-screen, hud-direct-condenser: REFERENCE; its final radius leaves a blur that
+counts in every method's error there), seed 1000 and up, on every core, for --ref-seconds (the
+analytic scenes get a third of it). Then every method variant (forward; backward with next-event
+estimation; backward without it, the paper's plain method; photon: benchmarks/throughput.py's
+VARIANTS) renders at each budget in seconds (one process, seed = budget index), and the script
+records wall time, rays, the method's own efficiency, the relative RMSE
 against the reference over the whole image and over the bright region (pixels above 10 % of the
 reference's 99th percentile: the symbols of hud-direct, the lit panel of analytic-mirror), with the
 reference's own noise subtracted from the mean squared error, and the time efficiency
@@ -44,17 +46,20 @@ from tracer.world import World  # noqa: E402
 CACHE = ROOT / "benchmarks" / "cache"
 RESULTS = ROOT / "benchmarks" / "results"
 DOCS = ROOT / "docs"
-#: The reference's method (backward with next-event estimation) and the presets that get the full
-#: --ref-seconds (the rest, closed-form scenes, a third).
+#: The reference's method: backward with next-event estimation, or for the presets named here the
+#: photon method; and the presets that get the full --ref-seconds (the rest, closed-form scenes, a third).
 REFERENCE_METHOD = "backward"
-FULL_REFERENCE = ("hud-direct",)
+REFERENCE = {"hud-screen": "photon", "hud-screen-ideal-lcd": "photon", "hud-direct-condenser": "photon"}
+FULL_REFERENCE = ("hud-direct", "hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser")
+#: The accuracy at which the summary compares the methods' time (relative RMSE over the bright region).
+TARGET_RMSE = 0.05
 #: The paper's figure for hud-direct (sec. 4.2): forward 4 hours, backward 2 days.
 PAPER_FORWARD_H, PAPER_BACKWARD_H = 4.0, 48.0
 
 
 def reference(name: str, folder: Path, seconds: float, workers: int) -> dict:
     scene = load_scene(folder)
-    method = REFERENCE_METHOD
+    method = REFERENCE.get(name, REFERENCE_METHOD)
     path = CACHE / f"{name}-{scene.scene_hash}-{method}-{seconds:g}s.npz"
     if path.is_file():
         data = np.load(path)
@@ -240,10 +245,58 @@ def forward_backward_note(rows_by_preset: dict[str, list[dict]], budget: float) 
     return lines
 
 
+def time_to_target(rows: list[dict], target: float = TARGET_RMSE) -> float | None:
+    """Seconds a method needs for ``target`` relative RMSE over the bright region: the first budget that
+    reaches it, interpolated on log-log axes from the one before, or, where none does, extrapolated
+    from the last budget at slope -1/2 (noise falling as 1/sqrt(time); a method whose error is bias
+    does better on the chart than this says). None where the method cannot render."""
+    r = sorted((x for x in rows if charted(x)), key=lambda x: x["seconds"])
+    if not r:
+        return None
+    for a, b in zip([None] + r[:-1], r, strict=True):
+        if b["rel_rmse_region"] <= target:
+            if a is None or a["rel_rmse_region"] <= target:
+                return b["seconds"]
+            s = math.log(target / a["rel_rmse_region"]) / math.log(b["rel_rmse_region"] / a["rel_rmse_region"])
+            return a["seconds"] * (b["seconds"] / a["seconds"]) ** s
+    last = r[-1]
+    return last["seconds"] * (last["rel_rmse_region"] / target) ** 2
+
+
+def target_note(rows_by_preset: dict[str, list[dict]], presets=("hud-screen", "hud-direct-condenser")) -> list[str]:
+    """For the scenes whose scattering surfaces see the LEDs only through glass: each method's time to
+    TARGET_RMSE on the bright region (the symbols), and how much sooner the best of ours gets there
+    than the best other method and than Mitsuba's path tracer."""
+    lines = []
+    for name in presets:
+        rows = rows_by_preset.get(name)
+        if not rows:
+            continue
+        times = {m: time_to_target([r for r in rows if r["method"] == m])
+                 for m in dict.fromkeys(r["method"] for r in rows)}
+        known = {m: t for m, t in times.items() if t is not None}
+        if not known:
+            continue
+        listing = ", ".join(f"{m} {t:.3g} s" if t is not None else f"{m} cannot render" for m, t in times.items())
+        ours = {m: t for m, t in known.items() if m in VARIANTS}
+        best = min(ours, key=ours.get)
+        others = {m: t for m, t in known.items() if m != best}
+        line = f"{name}, symbols: time to {TARGET_RMSE:.0%} relative RMSE: {listing}."
+        if others:
+            rival = min(others, key=others.get)
+            line += f" {best} gets there {others[rival] / ours[best]:.3g} times sooner than the next best ({rival})"
+            if "mitsuba-path" in known and rival != "mitsuba-path":
+                line += f" and {known['mitsuba-path'] / ours[best]:.3g} times sooner than mitsuba-path"
+            line += "."
+        lines.append(line)
+    return lines
+
+
 def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -> str:
     """benchmarks/results/summary.md from the presets' CSVs, with ``sections`` (Markdown) appended."""
-    rows = {name: read_rows(name) for name in presets}
-    text = "\n".join(summary_table(rows, budget)) + "\n\n" + "\n".join(forward_backward_note(rows, budget)) + "\n"
+    rows = {name: read_rows(name) for name in presets if (RESULTS / f"{name}.csv").is_file()}
+    notes = forward_backward_note(rows, budget) + target_note(rows)
+    text = "\n".join(summary_table(rows, budget)) + "\n\n" + "\n\n".join(notes) + "\n"
     for section in sections:
         text += "\n" + section.rstrip() + "\n"
     (RESULTS / "summary.md").write_text(text)
@@ -264,7 +317,7 @@ def main():
         rows = measure(name, folder, ref, args.budgets)
         write_rows(name, rows)
         chart(name, rows, ref)
-    print(write_summary(args.presets, max(args.budgets)))
+    print(write_summary(list(PRESETS), max(args.budgets)))
 
 
 if __name__ == "__main__":

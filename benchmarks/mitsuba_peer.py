@@ -218,7 +218,7 @@ def main():
         cv.write_rows(name, ours + rows)
         cv.chart(name, cv.read_rows(name), ref)
     checks = run_checks()
-    print(cv.write_summary(args.presets, max(args.budgets), [section(info, checks, max(args.budgets))]))
+    print(cv.write_summary(list(PRESETS), max(args.budgets), [section(info, checks, max(args.budgets))]))
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ from tracer.world import World  # noqa: E402
 
 #: The method variants measured: label -> (method, options that differ from the scene's).
 VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
-            "backward, no NEE": ("backward", {"next_event": False})}
+            "backward, no NEE": ("backward", {"next_event": False}), "photon": ("photon", {})}
 
 
 #: Paths per batch of the measured renders: the command line's batch for a budget in rays (None: sized

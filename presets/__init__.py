@@ -4,7 +4,15 @@ Each preset module has ``NAME``, ``SUMMARY`` (one line) and ``write(folder) -> P
 add-on builds its "Add HUD preset" menu from the same registry.
 """
 
-from . import analytic_disk, analytic_furnace, analytic_mirror, hud_direct, hud_direct_condenser, hud_screen
+from . import (
+               analytic_disk,
+               analytic_furnace,
+               analytic_mirror,
+               hud_direct,
+               hud_direct_condenser,
+               hud_screen,
+               hud_screen_ideal,
+)
 
-PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_direct_condenser, analytic_mirror, analytic_disk,
-                               analytic_furnace)}
+PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_screen_ideal, hud_direct_condenser, analytic_mirror,
+                               analytic_disk, analytic_furnace)}

@@ -30,6 +30,16 @@ def disk(radius: float, segments: int = 128):
     return verts, faces
 
 
+def annulus(r_inner: float, r_outer: float, segments: int = 128):
+    """A flat ring in the local xy plane, centred, normal +z: (vertices, faces)."""
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    ring = lambda r: np.stack([r * np.cos(ang), r * np.sin(ang), np.zeros(segments)], 1)  # noqa: E731
+    verts = np.concatenate([ring(r_inner), ring(r_outer)])
+    k = np.arange(segments)
+    a, b, c, d = k, (k + 1) % segments, segments + (k + 1) % segments, segments + k
+    return verts, np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
+
+
 def box(size_x: float, size_y: float, size_z: float):
     """A closed box centred at the origin with outward normals: (vertices, faces)."""
     import trimesh

@@ -12,9 +12,10 @@ Optical design (units mm; the axis runs from the mirror through the screen towar
 
 - The mirror and windshield are hud-direct's: the screen sits where hud-direct's LCD does
   (s_o = 177.8 mm from the mirror), so its virtual image lies 2.5 m from the eye and spans the field.
-- The projection lens (f = 25 mm, n = 1.52) images the LCD onto the screen magnified 3 times: LCD at
-  s = f (1 + 1/m) before the lens, screen at s' = f (1 + m) after it (thick-lens focal length from the
-  lensmaker's equation).
+- The projection lens (f = 25 mm, n = 1.52, biconvex) images the LCD onto the screen magnified 3 times:
+  LCD at s = f (1 + 1/m) before its first principal plane, screen at s' = f (1 + m) after its second
+  (thick-lens focal length and principal planes from the lensmaker's equation); an aperture stop of
+  4 mm radius in front of it.
 - Lighting optics (Koehler illumination): a plano-convex collimator with the LEDs at its back focus
   sends each LED's light as a parallel beam; a plano-convex field lens (the condenser) just behind
   the LCD focuses those beams into the projection lens, so that the light through every LCD cell
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._build import SceneBuilder, box, disk, frame_matrix, lens, lens_focal_length, rectangle
+from ._build import SceneBuilder, annulus, box, disk, frame_matrix, lens, lens_focal_length, rectangle
 from .hud_direct import GLASS_MM, LED_TO_MIRROR, MIRROR_R, PUPIL_MM, RESOLUTION, VID, VIEW_DEG, design, ellipsoid_patch
 from .slide import slide_image
 
@@ -44,13 +45,17 @@ SUMMARY = ("the paper's HUD with a diffuse screen: LEDs, condenser, LCD 300:1, p
 IOR = 1.52
 PROJECTION = {"r": 25.6, "thickness": 5.0, "semi_diameter": 9.0}  # biconvex, f = 25 mm
 MAGNIFICATION = 3.0  # screen / LCD
+STOP_RADIUS = 4.0  # mm, the aperture stop just before the projection lens
 COLLIMATOR = {"r": 8.0, "thickness": 5.5, "semi_diameter": 7.0}  # plano-convex, f = 15.4 mm
 CONDENSER = {"r": 19.2, "thickness": 3.0, "semi_diameter": 7.0}  # plano-convex field lens, f = 36.9 mm
 LCD_TO_CONDENSER = 1.0  # gap between the LCD and the condenser's flat face, mm
 CONDENSER_TO_COLLIMATOR = 10.0  # gap between the two lenses' vertices, mm
 LED_COUNT = 3
 LED_PITCH = 0.8  # mm, along x
-LED_LUMINANCE = 2.0e8  # cd/m^2 per die: symbols of about 10^4 cd/m^2 at the eye (the README's table)
+#: cd/m^2 per die: symbols of about 10^4 cd/m^2 at the eye, the paper's Fig. 9 (README: a Lambertian
+#: screen spreads its light over pi sr, of which the eyebox takes a few 1e-5, so this design needs
+#: about 15,000 lm per die; real rear-projection screens concentrate it with gain).
+LED_LUMINANCE = 1.4e11
 LCD_TRANSMITTANCE = 0.05
 CONTRAST = 300.0
 SCREEN_TRANSMITTANCE = 0.7
@@ -93,10 +98,11 @@ def _bars(sb: SceneBuilder, name: str, inner: tuple[float, float], bar: float, f
         sb.add(f"{name}_{i}", (bv + [cx, cy, 0.0], bf), {"type": "absorber"}, frame)
 
 
-def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: float = CONTRAST) -> Path:
+def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: float = CONTRAST, name: str = NAME,
+          summary: str = SUMMARY) -> Path:
     o = optics()
     d = o["design"]
-    sb = SceneBuilder(Path(folder), NAME, SUMMARY)
+    sb = SceneBuilder(Path(folder), name, summary)
     x_axis = np.array([1.0, 0.0, 0.0])
     r2 = d["r2"]
     at = lambda s: d["mirror"] + s * r2  # noqa: E731  (a point on the axis)
@@ -125,6 +131,11 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: f
     p = PROJECTION
     sb.add("projection_lens", lens(p["r"], p["r"], p["thickness"], p["semi_diameter"]),
            {"type": "dielectric", "ior": IOR}, frame_matrix(at(o["lens"]), x_axis, r2), smooth=True)
+    # The aperture stop: an absorbing plate just before the lens with a hole of STOP_RADIUS (f/3.2). It
+    # keeps the lens's marginal zones, whose spherical aberration and coma smeared each symbol into a
+    # comet on the screen, and any light beside the lens, off the screen.
+    sb.add("lens_stop", annulus(STOP_RADIUS, 40.0), {"type": "absorber"},
+           frame_matrix(at(o["lens"] + 0.5 * p["thickness"] + 0.5), x_axis, r2))
     img_rel = "textures/slide.png"
     slide_image(sb.folder / img_rel)
     w_lcd, h_lcd = o["lcd_size"]

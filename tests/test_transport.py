@@ -74,7 +74,7 @@ RAYS = {"hud-direct": 4_000_000, "analytic-mirror": 1_500_000, "analytic-disk": 
         "analytic-furnace": 1_000_000}
 #: Presets that backward tracing cannot render in a test's time (its eye paths must find a 0.2 mm LED
 #: through a diffuse screen and a projection lens): photon and forward agree on them instead.
-PHOTON_PRESETS = ("hud-screen",)
+PHOTON_PRESETS = ("hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser")
 
 
 @pytest.mark.parametrize("name", [n for n in PRESETS if n not in PHOTON_PRESETS])

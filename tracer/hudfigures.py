@@ -5,11 +5,12 @@ contrast" of the spot and the "maximum contrast" of the symbols).
 
 The display region is where the eye's chief rays reach the display through its specular optics (the
 dominant chain of :func:`tracer.analysis.specular_paths`: through the LCD, or ending on the screen),
-eroded by one analysis cell. Inside it, pixels split by the modes of their log luminance (Otsu's
-threshold, Otsu 1979, doi:10.1109/TSMC.1979.4310076, for three classes, with classes whose means
-lie within a decade merged): an LCD's clear and black cells differ by its contrast ratio, two well
-separated modes; a third, darker mode (a screen's margin that the LCD's image does not reach) is
-left out as unlit. The split does not depend on the method, so every method
+eroded by one analysis cell. Inside it, the symbols are the pixels above SYMBOL_SHARE of the display's
+99th percentile (an LCD's clear and black cells differ by its contrast ratio); among the rest, the
+most populous mode of the log luminance is the black leak, and darker modes a decade or more below
+it (a screen's margin that the LCD's image does not reach) are left out as unlit (modes by Otsu's
+threshold for three classes, classes whose means lie within a decade merged; Otsu 1979,
+doi:10.1109/TSMC.1979.4310076). The split does not depend on the method, so every method
 is judged on one table.
 
 - ``symbol_cd_m2``, ``background_cd_m2``: means over the symbol pixels eroded by one pixel and the
@@ -32,6 +33,9 @@ from .analysis import specular_paths
 
 #: Window of the spot's smoothing, as a share of the display's width in pixels.
 SPOT_WINDOW = 0.08
+#: Symbols are the pixels above this share of the display's 99th percentile of luminance: an LCD's
+#: clear cells vary less than tenfold across a display, its black cells lie tenfold (CR >= 10) below.
+SYMBOL_SHARE = 0.1
 #: Pixels of erosion of the background (from the symbols' edges and the display's).
 BACKGROUND_EROSION = 3
 #: Log-luminance histogram bins for Otsu's threshold.
@@ -121,19 +125,23 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
     if len(pos) < 16:
         out["note"] = "the display region is dark"
         return out
-    logv = np.log10(pos)
-    cuts = log_modes(logv)
-    if not cuts:
+    top = float(np.percentile(pos, 99))
+    if np.percentile(pos, 5) > SYMBOL_SHARE * top:  # no dark cells: one mode, nothing to tell apart
         out["note"] = "the display is uniform (no symbols and background to tell apart)"
         out["display_cd_m2"] = float(vals.mean())
         return out
-    t = 10 ** cuts[-1]
+    t = SYMBOL_SHARE * top
     sym = mask & (y >= t)
     bg = mask & (y < t)
-    if len(cuts) == 2:
-        unlit = bg & (y < 10 ** cuts[0])
-        out["unlit_pixels"] = int(unlit.sum())
-        bg &= ~unlit
+    dark = np.log10(y[bg & (y > 0)])
+    cuts = log_modes(dark) if len(dark) >= 32 else []
+    if cuts:  # the most populous mode is the black leak; modes below it are unlit
+        counts = np.bincount(np.searchsorted(cuts, dark, side="right"), minlength=len(cuts) + 1)
+        main = int(np.argmax(counts))
+        if main > 0:
+            unlit = bg & (y < 10 ** cuts[main - 1])
+            out["unlit_pixels"] = int(unlit.sum())
+            bg &= ~unlit
     # Symbols eroded by one pixel; the background by BACKGROUND_EROSION, away from the halo that the
     # pupil's blur and a photon gather's radius spread around every symbol.
     sym_in, bg_in = _erode(sym), bg
@@ -141,7 +149,7 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
         bg_in = _erode(bg_in)
     l_sym = float(y[sym_in].mean()) if sym_in.any() else float(y[sym].mean())
     l_bg = float(y[bg_in].mean()) if bg_in.any() else (float(y[bg].mean()) if bg.any() else 0.0)
-    out |= {"threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
+    out |= {"symbol_threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
             "symbol_cd_m2": l_sym, "background_cd_m2": l_bg,
             "contrast_ratio": (l_sym + l_bg) / l_bg if l_bg > 0 else None}
     if bg_in.sum() >= 16 and l_bg > 0:
