@@ -54,8 +54,8 @@ LED_COUNT = 3
 LED_PITCH = 0.8  # mm, along x
 #: cd/m^2 per die: symbols of about 10^4 cd/m^2 at the eye, the paper's Fig. 9 (README: a Lambertian
 #: screen spreads its light over pi sr, of which the eyebox takes a few 1e-5, so this design needs
-#: about 15,000 lm per die; real rear-projection screens concentrate it with gain).
-LED_LUMINANCE = 1.4e11
+#: about 12,000 lm per die; real rear-projection screens concentrate it with gain).
+LED_LUMINANCE = 9.2e10
 LCD_TRANSMITTANCE = 0.05
 CONTRAST = 300.0
 SCREEN_TRANSMITTANCE = 0.7
