@@ -36,8 +36,9 @@ extension: $(STAMP)
 	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
 	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip
 
-# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 30 minutes on 2 cores: references,
-# 4 presets x 3 method variants x 31 s of budgets, Mitsuba's 4 x 2 x 31 s, the throughput runs and the eyebox scan).
+# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 50 minutes on 2 cores: references,
+# 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs, the eyebox scan
+# and the two hud-screen renders of docs/hud-screen-variants.png).
 # Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15
 # crash it), installed here when missing; without root or apt-get it runs the scalar variant and says so.
 LLVM19 = ls /usr/lib/*/libLLVM.so.19* 2>/dev/null | head -n 1
@@ -52,3 +53,4 @@ bench: $(STAMP)
 	DRJIT_LIBLLVM_PATH="$$($(LLVM19))" $(PY) benchmarks/mitsuba_peer.py
 	$(PY) benchmarks/throughput.py --seconds 10 --repeats 3
 	$(PY) benchmarks/eyebox.py --half 90 30 --step 10
+	$(PY) benchmarks/screen_variants.py --seconds 120
