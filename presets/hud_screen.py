@@ -60,6 +60,7 @@ LCD_TRANSMITTANCE = 0.05
 CONTRAST = 300.0
 SCREEN_TRANSMITTANCE = 0.7
 SCREEN_MARGIN = 4.0  # mm of screen beyond the LCD's image on each side
+FRAME = 30.0  # mm, width of the absorbing frame around the screen
 
 
 def optics() -> dict:
@@ -119,7 +120,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: f
     sb.add("screen", rectangle(sw, sh)[:2],
            {"type": "lambertian_transmitter", "transmittance": SCREEN_TRANSMITTANCE,
             "aim": {"target": "pupil_image", "share": 0.5, "mode": "away"}}, screen_frame)
-    _bars(sb, "screen_frame", (sw, sh), 25.0, screen_frame)
+    _bars(sb, "screen_frame", (sw, sh), FRAME, screen_frame)
     theta = math.radians(d["incidence_windshield_deg"])
     theta_t = math.asin(math.sin(theta) / 1.52)
     ghost_shift = 2 * GLASS_MM * math.tan(theta_t) * math.cos(theta) * LED_TO_MIRROR / d["d2"]
@@ -160,7 +161,19 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: f
         lv, lf, _ = rectangle(0.2, 0.2)
         sb.add(f"led_{k}", (lv, lf), {"type": "absorber"}, frame_matrix(at(o["led"]) + offset, x_axis, -r2),
                emission={"luminance": LED_LUMINANCE, "aim": {"target": "collimator_aperture", "share": 0.95}})
-    hv, hf, _ = rectangle(40.0, 40.0)
+    # The housing: an absorbing tube from the screen's frame to the LED board, so that no LED light
+    # leaves except through the screen (open LEDs lit the screen's back by way of the windshield: rare
+    # particles a million times the weight of those through the LCD's black cells).
+    hw, hh = 0.5 * sw + FRAME - 4.0, 0.5 * sh + FRAME - 4.0  # inside the screen frame's outer edge
+    length = o["led"] + 1.0 - o["screen"]
+    middle = at(0.5 * (o["screen"] + o["led"] + 1.0))
+    across = np.cross(r2, x_axis)
+    for i, (offset, normal, width) in enumerate([(hw * x_axis, -x_axis, 2 * hh), (-hw * x_axis, x_axis, 2 * hh),
+                                                 (hh * across, -across, 2 * hw), (-hh * across, across, 2 * hw)]):
+        side = np.cross(normal, r2)
+        wv, wf, _ = rectangle(width, length)
+        sb.add(f"housing_{i}", (wv, wf), {"type": "absorber"}, frame_matrix(middle + offset, side, normal))
+    hv, hf, _ = rectangle(2 * hw + 2.0, 2 * hh + 2.0)
     sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(at(o["led"] + 1.0), x_axis, -r2))
     eye = d["eye"]
     return sb.write(

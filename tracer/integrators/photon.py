@@ -44,6 +44,7 @@ import math
 
 import numpy as np
 
+from ..film import Splats
 from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
 from ..schema import Field
 from ..units import luminance3
@@ -51,7 +52,7 @@ from ..vec import F32, dot
 from .backward import BackwardTracer
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
 from .forward import Particles
-from .path import Context, PathMethod, PathState, continue_by_sampling, trace
+from .path import Context, PathMethod, PathState, Timers, continue_by_sampling, trace
 
 #: Independent replicates per batch: eye passes over all pixels, each with its own share of photons.
 REPLICATES = 2
@@ -250,8 +251,6 @@ class PhotonTracer(BackwardTracer):
         o, d, _ = eye.generate_rays(sx, sy, np.zeros((2, n)))
         state = PathState(o, d, np.ones((3, n), F32), np.arange(n), np.zeros(n, np.int64), np.zeros(n),
                           np.ones(n, bool), {"sample": np.arange(n), "splits": np.zeros(n, np.int8)})
-        from ..film import Splats
-        from .path import Timers
         ctx = Context(self.world, rng, Timers(), Splats())
         ctx.sample_found = np.zeros(n, bool)
         self._vis, self._footprint_pass = [], True
@@ -293,8 +292,6 @@ class PhotonTracer(BackwardTracer):
             extent = self.world.accel.extent if self.world.accel is not None else 1.0
             self.radius_from = "1e-3 of the scene's extent (no scattering surface on the footprint grid)"
             return float(1e-3 * max(extent, 1e-3))
-        from ..film import Splats
-        from .path import Timers
         n = PILOT_PHOTONS
         k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
         ctx = Context(self.world, rng, Timers(), Splats())
@@ -320,6 +317,7 @@ class PhotonTracer(BackwardTracer):
         self.reference_luminance  # noqa: B018
 
     def radius(self, batch: int) -> float:
+        """The gather radius (mm) of batch ``batch`` (:func:`radius_schedule`)."""
         return radius_schedule(self.r0, self.alpha, batch)
 
     # -- the batch ---------------------------------------------------------------------------------
@@ -399,7 +397,9 @@ class PhotonTracer(BackwardTracer):
             b = min(a + WAVE, len(pix))
             self._vis = []
             state = self.camera_paths(ctx.rng, pix[a:b], rep[a:b], a)
-            self.truncated += trace(self, state, ctx, self.max_depth)
+            # No probe of paths cut at max_depth: their visibility points would need a gather of their
+            # own (eye paths here run along specular chains only; the cut count is still reported).
+            self.truncated += trace(self, state, ctx, self.max_depth, probe=False)
             ctx.store["visibility_points"] = ctx.store.get("visibility_points", 0) + sum(len(v[2]) for v in self._vis)
             with ctx.timers("film"):
                 self._gather(ctx, grid, self._vis, np.maximum(per_replicate, 1), counts)
@@ -457,6 +457,7 @@ class PhotonTracer(BackwardTracer):
             "photons_emitted": figures["photons_emitted"],
             "photons_stored": figures["photons_stored"],
             "photon_paths_cut_at_max_depth": figures["photon_paths_cut"],
+            "eye_paths_cut_at_max_depth": int(self.truncated),
             "visibility_points": vis,
             "photons_per_visibility_point": figures["photons_gathered"] / vis if vis else 0.0,
         }
