@@ -117,6 +117,8 @@ def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tu
 #: by the condenser's magnification c / u, so their images tile the eyebox as before.
 CONDENSER = {"r": 21.0, "thickness": 9.0, "semi_diameter": 16.0, "ior": 1.52}
 CONDENSER_GAP = 20.0
+#: Radius (mm) of the condenser's central zone that the LEDs aim at.
+CONDENSER_AIM_RADIUS = 12.0
 
 
 def condenser_layout() -> dict:
@@ -183,9 +185,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
            frame_matrix(d["led"] + ghost_shift * across - 0.01 * r2, x_axis, -r2))
     # LED dies facing the scatterer, aimed at it: a grid centred on the design LED position, so that
     # their images tile the eyebox. With a condenser, the dies sit closer on a smaller grid (its virtual
-    # image is the design grid) and still aim at the scatterer: the condenser narrows the aimed cone
-    # onto it (aiming at the whole condenser instead sent most particles past the scatterer, whose
-    # 39 x 17 mm the condenser's 32 mm aperture overfills from 20 mm).
+    # image is the design grid).
     led_center, pitch_scale, aim = d["led"], 1.0, {"target": "scatterer", "share": 0.95}
     if condenser:
         lay = condenser_layout()
@@ -195,7 +195,14 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
         sb.add("condenser", lens(c["r"], 0.0, c["thickness"], c["semi_diameter"]), {"type": "dielectric",
                                                                                    "ior": c["ior"]},
                frame_matrix(d["led"] - lay["center"] * r2, x_axis, -r2), smooth=True)
+        # The LEDs aim at the condenser's central zone: its light reaches the scatterer (the whole 32 mm
+        # overfills it from 20 mm; aiming at the scatterer itself leaves the light the condenser bends
+        # onto it to the own-law samples, 400 times heavier: both measured noisier, hud_direct_condenser.py).
+        flat = d["led"] - (lay["center"] - 0.5 * c["thickness"] - 0.05) * r2
+        sb.add("condenser_aperture", disk(CONDENSER_AIM_RADIUS, 64), {"type": "aperture"},
+               frame_matrix(flat, x_axis, -r2))
         led_center, pitch_scale = d["led"] - lay["led"] * r2, 1.0 / lay["magnification"]
+        aim = {"target": "condenser_aperture", "share": 0.95}
     k = 0
     for row in range(LED_GRID[1]):
         for col in range(LED_GRID[0]):

@@ -6,7 +6,7 @@ The condenser (f = 40 mm, n = 1.52, 32 mm across, convex face toward the scatter
 of hud-direct's design LED point F2 and forms there a virtual image of the LEDs, so that the concave
 mirror still images them onto the eyebox: the LEDs sit u = f c / (f + c) = 13.3 mm from the
 condenser's object-side principal plane (3.5 mm in front of F2), on a grid shrunk by the
-magnification c / u = 1.5, and aim at the scatterer through the condenser. Every straight line
+magnification c / u = 1.5, and aim at the condenser's central 24 mm. Every straight line
 from the scatterer to an LED crosses the condenser: next-event estimation from the scatterer is
 blocked by glass, as in real products, which is what makes this scene hard for a path tracer (the
 issue measured about 10 hours to 1 % noise with Mitsuba 3). See :mod:`presets.hud_direct` for the rest of the design.

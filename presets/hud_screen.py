@@ -22,6 +22,8 @@ Optical design (units mm; the axis runs from the mirror through the screen towar
   enters it. The LEDs' Lambertian falloff, mapped by the collimator onto the LCD, lights the middle of
   the slide more than its edges: through the LCD's black cells this is the rear-projection spot of
   the paper's Fig. 7b.
+- An aperture stop of 4 mm radius before the projection lens, and an absorbing housing from the
+  screen's frame to the LED board (light leaves only through the screen).
 - The LEDs aim at the collimator (the paper's directed split); the screen aims a share of its light
   "away from" the image of the eye pupil that the windshield and mirror form behind it (at hud-direct's
   design LED point), so that forward tracing can reach the eye.
