@@ -43,6 +43,7 @@ def _apply_object(obj, spec: dict, by_name: dict, root: Path):
     h.role = material["type"]
     schema_ui.apply(h, schema.fields, material, "", schema.alternatives, root, by_name)
     _apply_aim(h, "", material.get("aim"), by_name)
+    _apply_aim(h, "light_", material.get("light_aim"), by_name)
     if emission is not None:
         h.emits = True
         schema_ui.apply(h, EMISSION.fields, emission, "emission_", EMISSION.alternatives, root, by_name)

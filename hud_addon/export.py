@@ -192,8 +192,9 @@ def _matrix_mm(obj, unit_mm: float) -> list[list[float]]:
 
 
 def _aim_spec(obj, prefix: str) -> dict | None:
-    """The aim block of the material (``prefix`` "") or of the emission ("emission_"), None when not
-    aimed. Raises ValueError naming the object and the block when the aim object is not chosen."""
+    """The aim block of the material (``prefix`` ""), its light aim ("light_") or the emission's
+    ("emission_"), None when not aimed. Raises ValueError naming the object and the block when the aim
+    object is not chosen."""
     h = obj.hud
     kind = getattr(h, f"{prefix}aim")
     if kind == "NONE":
@@ -201,7 +202,7 @@ def _aim_spec(obj, prefix: str) -> dict | None:
     target = "eye" if kind == "EYE" else (getattr(h, f"{prefix}aim_object").name
                                          if getattr(h, f"{prefix}aim_object") else None)
     if target is None:
-        block = "emission aim" if prefix else "aim"
+        block = {"": "aim", "light_": "light aim", "emission_": "emission aim"}[prefix]
         raise ValueError(f"object {obj.name!r}: {block}: aim at an object, but none is chosen")
     return {"target": target, "share": getattr(h, f"{prefix}aim_share"), "mode": getattr(h, f"{prefix}aim_mode")}
 
@@ -220,9 +221,10 @@ def material_spec(obj, plan: _Plan, stem: str) -> dict:
         m = {"type": h.role} | schema_ui.export(h, schema.fields, "", schema.alternatives, save)
     except ValueError as e:
         raise ValueError(f"object {obj.name!r}: {e}") from None
-    aim = _aim_spec(obj, "") if schema.can_aim else None
-    if aim is not None:
-        m["aim"] = aim
+    for key, prefix in (("aim", ""), ("light_aim", "light_")):
+        aim = _aim_spec(obj, prefix) if schema.can_aim else None
+        if aim is not None:
+            m[key] = aim
     return m
 
 

@@ -31,14 +31,15 @@ ROLE_ITEMS = [("none", "None", "Not exported to the tracer")] + [
     (name, cls.schema.label, cls.schema.description) for name, cls in MATERIALS.items()]
 
 
-def _aim(prefix: str) -> dict:
-    """The paper's directed split (sec. 2) of a scattering material or of an emission."""
+def _aim(prefix: str, name: str = "Aim",
+         description: str = "Directed sampling for the forward method (paper sec. 2)") -> dict:
+    """The paper's directed split (sec. 2) of a scattering material or of an emission; with prefix
+    "light_", the guidance of eye paths toward the aperture through which a surface's light arrives."""
     return {
-        f"{prefix}aim": EnumProperty(name="Aim", items=[("NONE", "None", "No directed sampling"),
-                                                        ("EYE", "Eye pupil", "Aim at the eye pupil"),
-                                                        ("OBJECT", "Object", "Aim at a planar object")],
-                                     default="NONE",
-                                     description="Directed sampling for the forward method (paper sec. 2)"),
+        f"{prefix}aim": EnumProperty(name=name, items=[("NONE", "None", "No directed sampling"),
+                                                       ("EYE", "Eye pupil", "Aim at the eye pupil"),
+                                                       ("OBJECT", "Object", "Aim at a planar object")],
+                                     default="NONE", description=description),
         f"{prefix}aim_object": PointerProperty(name="Aim at", type=bpy.types.Object,
                                                description="A planar object: an aperture, a window, the LCD"),
         f"{prefix}aim_share": FloatProperty(name="Share", default=0.5, min=0.0, max=0.99,
@@ -78,6 +79,8 @@ def _object_annotations() -> dict:
     for cls in MATERIALS.values():
         annotations(cls.schema.fields, "", cls.schema.alternatives, ann)
     ann |= _aim("")
+    ann |= _aim("light_", "Light aim", "Guidance of eye paths (backward method) toward the aperture through which "
+                                       "this surface's light arrives, e.g. a condenser's face")
     annotations(EMISSION.fields, "emission_", EMISSION.alternatives, ann)
     ann |= _aim("emission_")
     return ann

@@ -62,6 +62,7 @@ class HUD_PT_object(_HudPanel, bpy.types.Panel):
         schema_ui.draw(col, h, schema.fields, "", schema.alternatives)
         if schema.can_aim:
             _draw_aim(col, h, "")
+            _draw_aim(col, h, "light_")
         col.prop(h, "smooth_normals")
         col.prop(h, "emits")
         if h.emits:

@@ -82,6 +82,11 @@ def scenario_roundtrip(out):
     led.hud.role, led.hud.emits, led.hud.emission_by, led.hud.emission_luminance = "absorber", True, "luminance", 1234.0
     h = led.hud
     h.emission_aim, h.emission_aim_object, h.emission_aim_share, h.emission_aim_mode = "OBJECT", mirror, 0.7, "toward"
+    bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0.3, 0.5, 0.0))
+    floor = bpy.context.object
+    floor.name = "floor"
+    floor.hud.role, floor.hud.reflectance = "lambertian", (0.5, 0.5, 0.5)
+    floor.hud.light_aim, floor.hud.light_aim_object, floor.hud.light_aim_share = "OBJECT", mirror, 0.6
     scene.hud.backward_max_depth, scene.hud.backward_next_event = 17, False  # method options are exported
     cam = scene.camera
     cam.location = (0.0, -1.0, 0.1)

@@ -91,6 +91,8 @@ def test_export_round_trip(tmp_path):
     assert led["luminance"] == pytest.approx(1234.0) and led["aim"] == {"target": "mirror", "share": pytest.approx(0.7),
                                                                          "mode": "toward"}
     assert "flux" not in led
+    assert objs["floor"]["material"]["light_aim"] == {"target": "mirror", "share": pytest.approx(0.6), "mode": "toward"}
+    assert "aim" not in objs["floor"]["material"]
     assert data["methods"]["backward"]["max_depth"] == 17 and data["methods"]["backward"]["next_event"] is False
     assert "exit_pupil" not in data["methods"]["backward"]
     eye = data["eye"]

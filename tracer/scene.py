@@ -38,7 +38,10 @@ the emission block is :data:`tracer.lights.EMISSION` (any material can emit). Th
 ``emitter`` of earlier files is short for an absorber with an emission block of the same fields.
 A scattering material and an emission may carry
 ``"aim": {"target": "eye" | "<object name>", "share": w, "mode": "toward" | "away"}``: the paper's
-directed split (sec. 2), used by the forward method. An object of type ``aperture`` is not traced:
+directed split (sec. 2), used by the forward method, and ``"light_aim"`` of the same form: the
+aperture through which the surface's light arrives (a condenser's face), toward which backward eye
+paths draw a share of their directions (the same one-sample mixture, unbiased for every share). An
+object of type ``aperture`` is not traced:
 it is a virtual surface that names where an optical system's pupil is, for aiming and for the
 backward eq. (3) strata.
 
@@ -110,6 +113,9 @@ class Material:
     type: str
     params: dict
     aim: Aim | None = None
+    #: Guidance of eye paths (backward tracing): a share of the directions drawn toward the aperture
+    #: through which the surface's light arrives ("light_aim").
+    light_aim: Aim | None = None
 
 
 @dataclass
@@ -284,12 +290,13 @@ def _material(ck: FieldChecker, spec, fld: str, root: Path) -> tuple[Material, d
         known = ", ".join([*MATERIALS, LEGACY_EMITTER])
         ck.fail(f"{fld}.type", f"unknown material {json.dumps(mtype)} (known: {known})")
     schema = MATERIALS[mtype].schema
-    extra = {"type"} | ({"aim"} if schema.can_aim else set())
+    extra = {"type"} | ({"aim", "light_aim"} if schema.can_aim else set())
     params = parse_block(ck, spec, fld, schema.fields, root, extra_keys=extra, alternatives=schema.alternatives)
     if schema.check is not None:
         schema.check(params, fail_in(ck, fld))
     aim = _aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None
-    return Material(mtype, params, aim), None, None
+    light_aim = _aim(ck, spec["light_aim"], f"{fld}.light_aim") if "light_aim" in spec else None
+    return Material(mtype, params, aim, light_aim), None, None
 
 
 def _emission(ck: FieldChecker, spec, fld: str) -> tuple[dict, Aim | None]:
@@ -555,6 +562,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     # Aim targets must exist; apertures must be planar for the solid-angle pdf to be exact.
     by_name = {o.name: o for o in objects}
     aims = [(o, o.material.aim, f"objects[{o.index}].material.aim.target") for o in objects]
+    aims += [(o, o.material.light_aim, f"objects[{o.index}].material.light_aim.target") for o in objects]
     aims += [(o, o.emission.aim, f"objects[{o.index}].{'emission' if 'emission' in objs_raw[o.index] else 'material'}"
                                  ".aim.target") for o in objects if o.emission is not None]
     for o, aim, fld in aims:

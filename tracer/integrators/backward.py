@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from ..optics.aimed import Aimed
 from ..optics.bsdf import RADIANCE, REFLECTION, TRANSMISSION
 from ..sampling import uniform_disk_concentric
 from ..schema import Field
@@ -142,6 +143,15 @@ class BackwardTracer(Integrator, PathMethod):
         self.nee_lights = self.next_event and len(self.lights) > 0
         self.nee_env = self.next_event and not self.env.is_black
         self.max_luminance = w.max_luminance
+        #: The samplers of eye paths: a material, or its mixture with directions toward the aperture
+        #: through which its light arrives ("light_aim"), the paper's directed split on the eye's side.
+        slots = len(self.scene.objects)
+        self._eye_sampler = {}
+        for m in w.materials:
+            aims = {o.slot: (w.target(o.material.light_aim.target), o.material.light_aim.share,
+                             o.material.light_aim.mode)
+                    for o in m.objects if o.material.light_aim is not None and o.material.light_aim.share > 0}
+            self._eye_sampler[id(m)] = Aimed(m, aims, slots) if aims else m
         self.npix = self.eye.width * self.eye.height
         self.strata = None
         ep = self.opts.get("exit_pupil")
@@ -279,12 +289,13 @@ class BackwardTracer(Integrator, PathMethod):
         data = lambda ok: {"owner": state.owner[ok], "rep": state.rep[ok], "sample": state.extra["sample"][ok]}  # noqa: E731
         if self.nee_lights:
             lights = self.lights
+            sampler = self._eye_sampler[id(bsdf)]
             imp = lights.importance(it.p, lambda w: bsdf.pdf(it, w))
             tri, y, pdf_area = lights.sample_direct(it.p, rng.random((3, m)), imp)
             w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
             f = bsdf.eval(it, w, RADIANCE)
             p_light = solid_angle_pdf(lights.pdf_power_area(tri), dist, cos_y)
-            mis = self._power_heuristic(p_light, bsdf.pdf(it, w)) if self.mis_with_hits else 1.0
+            mis = self._power_heuristic(p_light, sampler.pdf(it, w)) if self.mis_with_hits else 1.0
             g = cos_y / np.maximum(dist * dist * pdf_area, 1e-300)
             value = state.beta * f * radiance * (g * mis)
             ok = np.flatnonzero(luminance3(value) > 0)
@@ -296,7 +307,8 @@ class BackwardTracer(Integrator, PathMethod):
             w, radiance, p_env = self.env.sample(rng.random((2, m)))
             w = w.astype(F32)
             f = bsdf.eval(it, w, RADIANCE)
-            mis = self._power_heuristic(p_env, bsdf.pdf(it, w)) if self.mis_with_hits else 1.0
+            mis = (self._power_heuristic(p_env, self._eye_sampler[id(bsdf)].pdf(it, w)) if self.mis_with_hits
+                   else 1.0)
             value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))
             ok = np.flatnonzero(luminance3(value) > 0)
             if len(ok):
@@ -317,7 +329,7 @@ class BackwardTracer(Integrator, PathMethod):
         or T (n_i/n_t)^2 for radiance), where the smaller branch carries at least :data:`SPLIT_MIN` of
         the two: this removes the variance of the Fresnel choice (a windshield at 67 deg reflects
         14 %: the symbol and its ghost), and leaves the choice where one branch is negligible."""
-        out = continue_by_sampling(state, it, bsdf, ctx, RADIANCE, nxt, sl)
+        out = continue_by_sampling(state, it, self._eye_sampler[id(bsdf)], ctx, RADIANCE, nxt, sl)
         if self.splits == 0 or not (bsdf.delta and bsdf.flags & REFLECTION and bsdf.flags & TRANSMISSION):
             return out
         lobes = bsdf.lobes(it, RADIANCE)  # the branches the sample chose from (cached by the material)
