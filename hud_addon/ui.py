@@ -125,4 +125,35 @@ class HUD_PT_world(_HudPanel, bpy.types.Panel):
 
 CLASSES = (HUD_PT_render, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
 
-register, unregister = bpy.utils.register_classes_factory(CLASSES)
+#: Blender's own panels that apply to HUD Tracer renders: resolution, frame range, output and colour
+#: management, the camera's lens and display, the mesh's UV maps (an LCD slide needs them). The engine
+#: joins their COMPAT_ENGINES on register and leaves on unregister, as Blender's render-engine template
+#: and BlendLuxCore do; panels whose settings the tracer does not use (the camera's depth of field: the
+#: eye's pupil and accommodation are on the HUD Eye panel) stay hidden.
+BUILTIN_PANELS = (
+    "RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_output_color_management",
+    "RENDER_PT_encoding", "RENDER_PT_encoding_video", "RENDER_PT_color_management",
+    "RENDER_PT_color_management_curves", "RENDER_PT_color_management_display_settings",
+    "RENDER_PT_color_management_white_balance", "DATA_PT_context_camera", "DATA_PT_camera", "DATA_PT_lens",
+    "DATA_PT_camera_display", "DATA_PT_camera_safe_areas", "DATA_PT_context_mesh", "DATA_PT_uv_texture",
+    "DATA_PT_vertex_groups")
+
+
+def builtin_panels() -> list:
+    """The BUILTIN_PANELS this Blender has (names differ between versions)."""
+    return [p for p in (getattr(bpy.types, n, None) for n in BUILTIN_PANELS) if hasattr(p, "COMPAT_ENGINES")]
+
+
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
+
+
+def register():
+    _register_classes()
+    for panel in builtin_panels():
+        panel.COMPAT_ENGINES.add(ENGINE)
+
+
+def unregister():
+    for panel in builtin_panels():
+        panel.COMPAT_ENGINES.discard(ENGINE)
+    _unregister_classes()

@@ -53,12 +53,23 @@ def render_preset(module: str, out: Path, preset: str, method: str, rays: int, s
     return dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
 
 
+#: Blender's own panels a user of HUD Tracer needs (issue 11, finding 1).
+NEEDED_PANELS = ("RENDER_PT_format", "RENDER_PT_output", "RENDER_PT_frame_range", "RENDER_PT_color_management",
+                 "DATA_PT_lens", "DATA_PT_uv_texture")
+
+
+def panels_with_engine() -> dict:
+    return {n: "HUD_TRACER" in getattr(bpy.types, n).COMPAT_ENGINES for n in NEEDED_PANELS}
+
+
 def scenario_install_render(zip_path, out, preset, method, rays, seed):
     module = install_zip(zip_path)
     enabled = module in bpy.context.preferences.addons
+    panels = panels_with_engine()
     figures = render_preset(module, Path(out), preset, method, int(rays), int(seed))
     disable(module)
-    return {"module": module, "enabled": enabled, "figures": figures, "left_after_disable": hud_names()}
+    return {"module": module, "enabled": enabled, "figures": figures, "left_after_disable": hud_names(),
+            "panels": panels, "panels_after_disable": panels_with_engine()}
 
 
 def scenario_roundtrip(out):

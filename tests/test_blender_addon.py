@@ -58,6 +58,9 @@ def test_installed_extension_renders_like_the_tracer(extension_zip, tmp_path, me
     res, _ = scenario("install_render", extension_zip, tmp_path, "analytic-mirror", method, rays, 7)
     assert res["enabled"] and res["module"].endswith(".hud_tracer")
     assert res["left_after_disable"] == []
+    # Blender's Format, Output, Frame Range, Color Management, Lens and UV Maps panels show with HUD
+    # Tracer as the engine, and no longer once it is disabled.
+    assert all(res["panels"].values()) and not any(res["panels_after_disable"].values()), res["panels"]
     ch = read_multilayer(tmp_path / "blender.exr")
     rgb = np.stack([ch["ViewLayer.Combined.R"], ch["ViewLayer.Combined.G"], ch["ViewLayer.Combined.B"]], -1)
     y_blender = rgb @ np.array([0.2126, 0.7152, 0.0722])
