@@ -365,6 +365,26 @@ def _check_replaceable(target: Path) -> None:
                          "whole)")
 
 
+def render_visible(view_layer) -> set[str]:
+    """Names of the objects a render of ``view_layer`` shows, as Blender decides for renders: the
+    object's own "Disable in Renders" (hide_render) unset, in a collection that is neither excluded
+    from the view layer nor disabled in renders anywhere above it. Hiding in the viewport (the eye
+    icon, hide_viewport) does not matter: it is for the viewport (issue 11, finding 3)."""
+    names: set[str] = set()
+
+    def walk(layer_collection, hidden: bool):
+        if layer_collection.exclude:
+            return
+        hidden = hidden or bool(getattr(layer_collection.collection, "hide_render", False))
+        if not hidden:
+            names.update(o.name for o in layer_collection.collection.objects if not o.hide_render)
+        for child in layer_collection.children:
+            walk(child, hidden)
+
+    walk(view_layer.layer_collection, False)
+    return names
+
+
 def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = None) -> Path:
     """Write the scene folder for ``depsgraph``'s scene into ``folder``; returns ``folder``.
 
@@ -394,8 +414,9 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     plan = _Plan()
     eye = eye_spec(scene)
     environment = environment_spec(scene, plan)
+    rendered = render_visible(depsgraph.view_layer)
     exported = [obj for obj in scene.objects
-                if obj.type == "MESH" and obj.hud.role != "none" and obj.visible_get()]
+                if obj.type == "MESH" and obj.hud.role != "none" and obj.name in rendered]
     stems = _mesh_stems(exported)
     objects = []
     for obj in exported:

@@ -164,6 +164,39 @@ def scenario_name_collision(out):
     return expected
 
 
+def scenario_visibility(out):
+    """Render visibility decides what is exported (issue 11, finding 3): an object hidden in the
+    viewport only is exported; one disabled in renders, one in a collection disabled in renders and
+    one in a collection excluded from the view layer are not."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    scene = bpy.context.scene
+    names = {}
+    for i, name in enumerate(("shown", "viewport_hidden", "render_hidden", "in_hidden_collection",
+                              "in_excluded_collection")):
+        bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0.2 * i, 0.5, 0.0))
+        obj = bpy.context.object
+        obj.name = name
+        obj.hud.role = "mirror"
+        names[name] = obj
+    names["viewport_hidden"].hide_set(True)
+    names["viewport_hidden"].hide_viewport = True
+    names["render_hidden"].hide_render = True
+    for name, flag in (("in_hidden_collection", "hide_render"), ("in_excluded_collection", "exclude")):
+        coll = bpy.data.collections.new(f"{name}_coll")
+        scene.collection.children.link(coll)
+        obj = names[name]
+        for c in list(obj.users_collection):
+            c.objects.unlink(obj)
+        coll.objects.link(obj)
+        if flag == "hide_render":
+            coll.hide_render = True
+        else:
+            bpy.context.view_layer.layer_collection.children[coll.name].exclude = True
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    disable(module)
+    return {}
+
+
 def _file_hashes(folder: Path) -> dict:
     """SHA-256 of every file under ``folder`` by relative path."""
     return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()

@@ -252,3 +252,11 @@ def test_a_failed_export_leaves_the_earlier_export_as_it_was(tmp_path):
     from tracer.scene import load_scene
 
     assert load_scene(tmp_path / "exports" / "F").object("mirror").vertices.shape[0] == 4
+
+
+def test_export_follows_render_visibility(tmp_path):
+    """Issue 11, finding 3: hidden in the viewport only -> exported; disabled in renders, in a
+    collection disabled in renders, or in a collection excluded from the view layer -> not."""
+    scenario("visibility", tmp_path)
+    data = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    assert sorted(o["name"] for o in data["objects"]) == ["shown", "viewport_hidden"]
