@@ -251,7 +251,8 @@ def methods_spec(scene) -> dict:
 
 def eye_spec(scene) -> dict:
     """The eye from the active camera: position, gaze (-Z), up (+Y), field from lens and sensor.
-    Raises ValueError when the scene has no active camera."""
+    Raises ValueError when the scene has no active camera, or one the eye cannot be (orthographic or
+    panoramic, or with a shifted lens), naming the camera (issue 11, finding 6)."""
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
         raise ValueError("the scene needs an active camera: it is the eye")
@@ -260,6 +261,12 @@ def eye_spec(scene) -> dict:
     w = max(1, int(r.resolution_x * r.resolution_percentage / 100))
     h = max(1, int(r.resolution_y * r.resolution_percentage / 100))
     cd = cam.data
+    if cd.type != "PERSP":
+        raise ValueError(f"camera {cam.name!r}: Lens > Type is {cd.type.title()}; the eye is a thin lens with a "
+                         "perspective view: set the type to Perspective")
+    if cd.shift_x or cd.shift_y:
+        raise ValueError(f"camera {cam.name!r}: Lens > Shift is ({cd.shift_x:g}, {cd.shift_y:g}); the eye looks "
+                         "along its axis: set the shift to 0 and turn the camera instead")
     fit = cd.sensor_fit
     horizontal = fit == "HORIZONTAL" or (fit == "AUTO" and w >= h)
     sensor = cd.sensor_height if fit == "VERTICAL" else cd.sensor_width
@@ -415,6 +422,10 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     eye = eye_spec(scene)
     environment = environment_spec(scene, plan)
     rendered = render_visible(depsgraph.view_layer)
+    for obj in scene.objects:  # a role on a text, curve or surface would be silently lost
+        if obj.type != "MESH" and obj.hud.role != "none" and obj.name in rendered:
+            raise ValueError(f"object {obj.name!r}: has the optical role {obj.hud.role!r} but is a {obj.type.title()}, "
+                             "not a mesh: convert it (Object > Convert > Mesh) or set its role to None")
     exported = [obj for obj in scene.objects
                 if obj.type == "MESH" and obj.hud.role != "none" and obj.name in rendered]
     stems = _mesh_stems(exported)

@@ -205,7 +205,8 @@ def _file_hashes(folder: Path) -> dict:
 
 def scenario_failed_export(out):
     """A good export into F, then exports into F that fail (missing HDRI file, LCD without slide, an aim
-    object not chosen, no camera; and a folder holding other files): what each says, and F afterwards."""
+    object not chosen, an orthographic or shifted camera, a role on a text, no camera; and a folder
+    holding other files): what each says, and F afterwards."""
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     export_scene = sys.modules[f"{module}.hud_addon.export"].export_scene
     out = Path(out)
@@ -301,6 +302,17 @@ def scenario_failed_export(out):
     (foreign / "notes.txt").write_text("not an export\n")
     attempt("foreign_folder", folder=foreign)
     camera = scene.camera
+    camera.data.type = "ORTHO"
+    attempt("ortho_camera")
+    camera.data.type = "PERSP"
+    camera.data.shift_x = 0.1
+    attempt("shifted_camera")
+    camera.data.shift_x = 0.0
+    bpy.ops.object.text_add(location=(0.0, 0.4, 0.0))
+    text = bpy.context.object
+    text.name, text.hud.role = "label", "mirror"
+    attempt("role_on_text")
+    bpy.data.objects.remove(text)
     camera_data = camera.data
     bpy.data.objects.remove(camera)
     attempt("no_camera")

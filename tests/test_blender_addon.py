@@ -232,6 +232,9 @@ def test_a_failed_export_leaves_the_earlier_export_as_it_was(tmp_path):
               "lcd_no_image": ["'lcd panel'", "Slide", "choose an image"],
               "aim_unset": ["'led'", "aim"],
               "no_camera": ["camera"],
+              "ortho_camera": ["camera 'Camera'", "Ortho", "Perspective"],
+              "shifted_camera": ["camera 'Camera'", "Shift", "0.1"],
+              "role_on_text": ["'label'", "Font", "not a mesh"],
               "disk_full": ["No space left on device"],
               "rename_fails": ["Permission denied"],
               "tracer_rejects": ["HUD export failed", "extra", "closed"]}
