@@ -263,3 +263,16 @@ def test_export_follows_render_visibility(tmp_path):
     scenario("visibility", tmp_path)
     data = json.loads((tmp_path / "scene" / "scene.json").read_text())
     assert sorted(o["name"] for o in data["objects"]) == ["shown", "viewport_hidden"]
+
+
+def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
+    """Issue 11, finding 10: the license is in the zip; the benchmarks' lock, the README (whose pictures
+    are not shipped), the Dask driver (dask is not bundled), tests and benchmarks are not."""
+    import zipfile
+
+    names = zipfile.ZipFile(extension_zip).namelist()
+    assert "LICENSE" in names and "blender_manifest.toml" in names
+    assert "tracer/render.py" in names and "hud_addon/engine.py" in names
+    for unused in ("requirements-bench.lock", "README.md", "tracer/distributed.py"):
+        assert unused not in names, unused
+    assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
