@@ -197,6 +197,24 @@ def scenario_visibility(out):
     return {}
 
 
+def scenario_tooltips():
+    """Every property of the add-on's property groups, as registered, with its description (issue 11,
+    finding 9: properties without a tooltip)."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    missing, groups = [], []
+    for owner in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World):
+        pointer = owner.bl_rna.properties.get("hud")
+        if pointer is None:
+            continue
+        group = pointer.fixed_type
+        groups.append(group.identifier)
+        for prop in group.properties:
+            if prop.identifier not in ("rna_type", "name") and not prop.description.strip():
+                missing.append(f"{group.identifier}.{prop.identifier}")
+    disable(module)
+    return {"missing": missing, "groups": groups}
+
+
 def _file_hashes(folder: Path) -> dict:
     """SHA-256 of every file under ``folder`` by relative path."""
     return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()

@@ -276,3 +276,10 @@ def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
     for unused in ("requirements-bench.lock", "README.md", "tracer/distributed.py"):
         assert unused not in names, unused
     assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
+
+
+def test_every_property_has_a_tooltip():
+    """Issue 11, finding 9: every property of the add-on's property groups has a description."""
+    res, _ = scenario("tooltips")
+    assert len(res["groups"]) >= 3, res["groups"]
+    assert res["missing"] == [], res["missing"]
