@@ -28,6 +28,7 @@ from tracer.imageio import read_exr_channels, write_png  # noqa: E402
 from tracer.integrators import Budget  # noqa: E402
 from tracer.render import adaptation_luminance, render_folder  # noqa: E402
 from tracer.tonemap import tonemap_ward  # noqa: E402
+from tracer.units import luminance  # noqa: E402
 
 VARIANTS = (("hud-screen-ideal-lcd", "(a) LCD of absolute contrast"), ("hud-screen", "(b) LCD 300:1"))
 #: The log view spans this many decades below the symbols' luminance.
@@ -50,14 +51,14 @@ def main():
             reports[name] = report
             print(name, json.dumps(report["hud"]), flush=True)
     real = images["hud-screen"]
-    y_real = real @ np.array([0.2126, 0.7152, 0.0722])
+    y_real = luminance(real)
     adapt = adaptation_luminance(y_real)
     top = reports["hud-screen"]["hud"]["symbol_cd_m2"]
     rows = []
     for name, _ in VARIANTS:
         rows.append(tonemap_ward(images[name], adapt)[0])
     for name, _ in VARIANTS:
-        y = images[name] @ np.array([0.2126, 0.7152, 0.0722])
+        y = luminance(images[name])
         v = np.clip((np.log10(np.maximum(y, 1e-30)) - np.log10(top) + DECADES) / DECADES, 0, 1)
         rows.append((np.repeat(v[..., None], 3, axis=2) * 255).astype(np.uint8))
     gap = np.full((4, real.shape[1], 3), 255, np.uint8)

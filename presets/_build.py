@@ -56,6 +56,16 @@ def sphere(radius: float, subdivisions: int = 4, inward: bool = False):
     return np.asarray(m.vertices), (f[:, ::-1] if inward else f)
 
 
+def frame_bars(sb, name: str, inner: tuple[float, float], bar: float, frame: list):
+    """Four absorbing bars, ``bar`` mm wide, framing an inner rectangle (w, h) mm in the plane of
+    ``frame`` (so that no light passes beside an LCD or a screen): objects "<name>_0" to "<name>_3"."""
+    w, h = inner
+    for i, (cx, cy, sx, sy) in enumerate([(0, (h + bar) / 2, w + 2 * bar, bar), (0, -(h + bar) / 2, w + 2 * bar, bar),
+                                          ((w + bar) / 2, 0, bar, h), (-(w + bar) / 2, 0, bar, h)]):
+        bv, bf, _ = rectangle(sx, sy)
+        sb.add(f"{name}_{i}", (bv + [cx, cy, 0.0], bf), {"type": "absorber"}, frame)
+
+
 def _sag(radius: float, rho: np.ndarray) -> np.ndarray:
     """Sag (mm) of a spherical surface of radius ``radius`` (0: flat) at heights ``rho`` from its axis."""
     if radius == 0:

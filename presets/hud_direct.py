@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._build import SceneBuilder, box, disk, frame_matrix, rectangle
+from ._build import SceneBuilder, box, disk, frame_bars, frame_matrix, lens, lens_focal_length, rectangle
 from .slide import slide_image
 
 NAME = "hud-direct"
@@ -124,8 +124,6 @@ CONDENSER_AIM_RADIUS = 12.0
 def condenser_layout() -> dict:
     """Where the condenser and the LEDs of hud-direct-condenser go: distances (mm) toward the mirror
     from the design LED point F2, the condenser's focal length and its magnification."""
-    from ._build import lens_focal_length
-
     c = CONDENSER
     f = lens_focal_length(c["r"], 0.0, c["thickness"], c["ior"])
     # Light enters the flat face and leaves the convex one: the principal planes lie t / n inside the
@@ -159,13 +157,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
     sb.add("lcd", (lcd_v, lcd_f), {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE,
                                    "contrast_ratio": CONTRAST}, lcd_frame, uv=lcd_uv)
     # Opaque frame around the LCD (four bars) so no unmodulated light passes beside it.
-    bar = 30.0
-    for i, (cx, cy, sx, sy) in enumerate([(0, (h_lcd + bar) / 2, w_lcd + 2 * bar, bar),
-                                          (0, -(h_lcd + bar) / 2, w_lcd + 2 * bar, bar),
-                                          ((w_lcd + bar) / 2, 0, bar, h_lcd),
-                                          (-(w_lcd + bar) / 2, 0, bar, h_lcd)]):
-        bv, bf, _ = rectangle(sx, sy)
-        sb.add(f"lcd_frame_{i}", (bv + [cx, cy, 0.0], bf), {"type": "absorber"}, lcd_frame)
+    frame_bars(sb, "lcd_frame", (w_lcd, h_lcd), 30.0, lcd_frame)
     # Raster scatterer 3 mm behind the LCD, a little larger than it.
     pupil_image_r = 0.5 * pupil_mm * LED_TO_MIRROR / d["d2"]
     scat_center = d["lcd_center"] + 3.0 * r2
@@ -190,8 +182,6 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
     if condenser:
         lay = condenser_layout()
         c = CONDENSER
-        from ._build import lens
-
         sb.add("condenser", lens(c["r"], 0.0, c["thickness"], c["semi_diameter"]), {"type": "dielectric",
                                                                                    "ior": c["ior"]},
                frame_matrix(d["led"] - lay["center"] * r2, x_axis, -r2), smooth=True)

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._build import SceneBuilder, annulus, box, disk, frame_matrix, lens, lens_focal_length, rectangle
+from ._build import SceneBuilder, annulus, box, disk, frame_bars, frame_matrix, lens, lens_focal_length, rectangle
 from .hud_direct import GLASS_MM, LED_TO_MIRROR, MIRROR_R, PUPIL_MM, RESOLUTION, VID, VIEW_DEG, design, ellipsoid_patch
 from .slide import slide_image
 
@@ -92,15 +92,6 @@ def optics() -> dict:
             "screen_size": screen_size, "lcd_size": lcd_size}
 
 
-def _bars(sb: SceneBuilder, name: str, inner: tuple[float, float], bar: float, frame: list):
-    """Four absorbing bars framing an inner rectangle (so no light passes beside it)."""
-    w, h = inner
-    for i, (cx, cy, sx, sy) in enumerate([(0, (h + bar) / 2, w + 2 * bar, bar), (0, -(h + bar) / 2, w + 2 * bar, bar),
-                                          ((w + bar) / 2, 0, bar, h), (-(w + bar) / 2, 0, bar, h)]):
-        bv, bf, _ = rectangle(sx, sy)
-        sb.add(f"{name}_{i}", (bv + [cx, cy, 0.0], bf), {"type": "absorber"}, frame)
-
-
 def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: float = CONTRAST, name: str = NAME,
           summary: str = SUMMARY) -> Path:
     o = optics()
@@ -122,7 +113,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: f
     sb.add("screen", rectangle(sw, sh)[:2],
            {"type": "lambertian_transmitter", "transmittance": SCREEN_TRANSMITTANCE,
             "aim": {"target": "pupil_image", "share": 0.5, "mode": "away"}}, screen_frame)
-    _bars(sb, "screen_frame", (sw, sh), FRAME, screen_frame)
+    frame_bars(sb, "screen_frame", (sw, sh), FRAME, screen_frame)
     theta = math.radians(d["incidence_windshield_deg"])
     theta_t = math.asin(math.sin(theta) / 1.52)
     ghost_shift = 2 * GLASS_MM * math.tan(theta_t) * math.cos(theta) * LED_TO_MIRROR / d["d2"]
@@ -148,7 +139,7 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, contrast: f
     lcd_frame = frame_matrix(at(o["lcd"]), -x_axis, -r2)
     sb.add("lcd", (lcd_v, lcd_f), {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE,
                                    "contrast_ratio": contrast}, lcd_frame, uv=lcd_uv)
-    _bars(sb, "lcd_frame", (w_lcd, h_lcd), 30.0, lcd_frame)
+    frame_bars(sb, "lcd_frame", (w_lcd, h_lcd), 30.0, lcd_frame)
     c = CONDENSER
     sb.add("condenser", lens(c["r"], 0.0, c["thickness"], c["semi_diameter"]),
            {"type": "dielectric", "ior": IOR}, frame_matrix(at(o["condenser"]), x_axis, r2), smooth=True)

@@ -42,13 +42,11 @@ BACKGROUND_EROSION = 3
 BINS = 256
 
 
-def _erode(mask: np.ndarray) -> np.ndarray:
-    out = mask.copy()
-    out[1:, :] &= mask[:-1, :]
-    out[:-1, :] &= mask[1:, :]
-    out[:, 1:] &= mask[:, :-1]
-    out[:, :-1] &= mask[:, 1:]
-    return out
+def erode(mask: np.ndarray, border_inside: bool = False) -> np.ndarray:
+    """Binary erosion of a 2D mask with the 3 x 3 cross; the image border counts as outside the mask,
+    or (``border_inside``) as continuing it (a display that fills the view keeps its edge pixels)."""
+    m = np.pad(mask, 1, mode="edge") if border_inside else np.pad(mask, 1, constant_values=False)
+    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
 
 
 def log_modes(logv: np.ndarray) -> list[float]:
@@ -101,7 +99,7 @@ def display_mask(world) -> np.ndarray | None:
     gh, gw = res["grid"]
     grid = np.zeros(gh * gw, bool)
     grid[main["pixel"]] = True
-    grid = _erode(grid.reshape(gh, gw))
+    grid = erode(grid.reshape(gh, gw), border_inside=True)
     s = res["stride"]
     eye = world.eye
     full = np.kron(grid, np.ones((s, s), bool))
@@ -144,9 +142,9 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
             bg &= ~unlit
     # Symbols eroded by one pixel; the background by BACKGROUND_EROSION, away from the halo that the
     # pupil's blur and a photon gather's radius spread around every symbol.
-    sym_in, bg_in = _erode(sym), bg
+    sym_in, bg_in = erode(sym, border_inside=True), bg
     for _ in range(BACKGROUND_EROSION):
-        bg_in = _erode(bg_in)
+        bg_in = erode(bg_in, border_inside=True)
     l_sym = float(y[sym_in].mean()) if sym_in.any() else float(y[sym].mean())
     l_bg = float(y[bg_in].mean()) if bg_in.any() else (float(y[bg].mean()) if bg.any() else 0.0)
     out |= {"symbol_threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),

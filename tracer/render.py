@@ -22,7 +22,7 @@ import numpy as np
 from . import __version__
 from .analysis import specular_paths
 from .errors import EstimateOverflowError
-from .hudfigures import hud_figures
+from .hudfigures import erode, hud_figures
 from .imageio import read_exr_channels, read_image, write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .outputs import OutputFile, OutputSet
@@ -34,12 +34,6 @@ from .world import World
 
 #: Median relative standard error of the lit pixels above which the report warns of noise.
 NOISY = 0.5
-
-
-def _erode(mask: np.ndarray) -> np.ndarray:
-    """Binary erosion with the 3 x 3 cross on a 2D grid (borders count as outside)."""
-    m = np.pad(mask, 1, constant_values=False)
-    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
 
 
 def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
@@ -145,7 +139,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         grid_lcd = np.full(npts, np.nan)
         grid_lcd[main["pixel"]] = main["lcd"]
         grid_lcd = grid_lcd.reshape(grid_h, grid_w)
-        masks["symbol"] = _erode(grid_lcd >= 0.5)
+        masks["symbol"] = erode(grid_lcd >= 0.5)
         # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
         # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
         background = grid_lcd < 0.5
@@ -153,11 +147,11 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             other = np.full(npts, np.nan)
             other[p["pixel"]] = p["lcd"]
             background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
-        masks["background"] = _erode(background)
+        masks["background"] = erode(background)
     else:
         reached = np.zeros(npts, bool)
         reached[res["paths"][0]["pixel"]] = True
-        masks["image"] = _erode(reached.reshape(grid_h, grid_w))
+        masks["image"] = erode(reached.reshape(grid_h, grid_w))
         out["image_path"] = res["paths"][0]["path"]
     blockers = dict(res["specular_blockers"])
     for key, mask in masks.items():

@@ -17,6 +17,7 @@ from .accel import Accelerator
 from .apertures import DiskTarget, MeshTarget
 from .eye import ThinLensEye
 from .lights import LightTable
+from .optics.aimed import Aimed
 from .optics.bsdf import Interaction
 from .optics.materials import make_materials
 from .scene import EyeSpec, Scene
@@ -73,6 +74,19 @@ class World:
             else:
                 self._targets[name] = MeshTarget(self.scene.object(name).triangles)
         return self._targets[name]
+
+    def aimed_samplers(self, aim_of) -> dict[int, object]:
+        """{id(material): its sampler}: the material, or its mixture with sampling toward targets
+        (:class:`tracer.optics.aimed.Aimed`) where objects of it name one; ``aim_of(scene_object)``
+        gives the object's Aim or None (the material's ``aim`` for particles, its ``light_aim`` for eye
+        paths)."""
+        slots = len(self.scene.objects)
+        out = {}
+        for m in self.materials:
+            aims = {o.slot: (self.target(a.target), a.share, a.mode)
+                    for o in m.objects if (a := aim_of(o)) is not None and a.share > 0}
+            out[id(m)] = Aimed(m, aims, slots) if aims else m
+        return out
 
     @property
     def rays_traced(self) -> int:

@@ -33,7 +33,6 @@ import math
 
 import numpy as np
 
-from ..optics.aimed import Aimed
 from ..optics.bsdf import RADIANCE, REFLECTION, TRANSMISSION
 from ..sampling import uniform_disk_concentric
 from ..schema import Field
@@ -145,13 +144,7 @@ class BackwardTracer(Integrator, PathMethod):
         self.max_luminance = w.max_luminance
         #: The samplers of eye paths: a material, or its mixture with directions toward the aperture
         #: through which its light arrives ("light_aim"), the paper's directed split on the eye's side.
-        slots = len(self.scene.objects)
-        self._eye_sampler = {}
-        for m in w.materials:
-            aims = {o.slot: (w.target(o.material.light_aim.target), o.material.light_aim.share,
-                             o.material.light_aim.mode)
-                    for o in m.objects if o.material.light_aim is not None and o.material.light_aim.share > 0}
-            self._eye_sampler[id(m)] = Aimed(m, aims, slots) if aims else m
+        self._eye_sampler = w.aimed_samplers(lambda o: o.material.light_aim)
         self.npix = self.eye.width * self.eye.height
         self.strata = None
         ep = self.opts.get("exit_pupil")
@@ -287,9 +280,9 @@ class BackwardTracer(Integrator, PathMethod):
         rng = ctx.rng
         accel = self.world.accel
         data = lambda ok: {"owner": state.owner[ok], "rep": state.rep[ok], "sample": state.extra["sample"][ok]}  # noqa: E731
+        sampler = self._eye_sampler[id(bsdf)]
         if self.nee_lights:
             lights = self.lights
-            sampler = self._eye_sampler[id(bsdf)]
             imp = lights.importance(it.p, lambda w: bsdf.pdf(it, w))
             tri, y, pdf_area = lights.sample_direct(it.p, rng.random((3, m)), imp)
             w, dist, radiance, cos_y = lights.connection(it.p, tri, y)
@@ -307,8 +300,7 @@ class BackwardTracer(Integrator, PathMethod):
             w, radiance, p_env = self.env.sample(rng.random((2, m)))
             w = w.astype(F32)
             f = bsdf.eval(it, w, RADIANCE)
-            mis = (self._power_heuristic(p_env, self._eye_sampler[id(bsdf)].pdf(it, w)) if self.mis_with_hits
-                   else 1.0)
+            mis = self._power_heuristic(p_env, sampler.pdf(it, w)) if self.mis_with_hits else 1.0
             value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))
             ok = np.flatnonzero(luminance3(value) > 0)
             if len(ok):

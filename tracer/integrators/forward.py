@@ -37,12 +37,7 @@ class Particles:
         self.world = world
         self.lights = world.lights
         slots = len(world.scene.objects)
-        self.samplers = []
-        for m in world.materials:
-            aims = {o.slot: (world.target(o.material.aim.target), o.material.aim.share, o.material.aim.mode)
-                    for o in m.objects if o.material.aim is not None and o.material.aim.share > 0}
-            self.samplers.append(Aimed(m, aims, slots) if aims else m)
-        self._sampler = {id(m): s for m, s in zip(world.materials, self.samplers, strict=True)}
+        self._sampler = world.aimed_samplers(lambda o: o.material.aim)
         aims = {o.slot: (world.target(o.emission.aim.target), o.emission.aim.share, o.emission.aim.mode)
                 for o in self.lights.objects if o.emission.aim is not None and o.emission.aim.share > 0}
         self.emission = Aimed(CosineEmission(), aims, slots)

@@ -80,6 +80,11 @@ MIN_RADIUS_FRACTION = 1e-3
 STORE_KEYS = ("photons_emitted", "photons_stored", "visibility_points", "photons_gathered", "photon_paths_cut")
 
 
+def _tally(ctx, key: str, count: int):
+    """Add ``count`` to the batch's figure ``key`` (ctx.store, summed over batches by the driver)."""
+    ctx.store[key] = ctx.store.get(key, 0) + count
+
+
 def radius_schedule(r0: float, alpha: float, k: np.ndarray | int) -> np.ndarray | float:
     """The gather radius (mm) of batch ``k`` (0-based): r_0 sqrt(prod_{i=1..k} (i + alpha) / (i + 1))
     (Knaus and Zwicker 2011, eq. 15, with batch k+1 their pass), never below MIN_RADIUS_FRACTION r_0."""
@@ -154,18 +159,6 @@ class PhotonGrid:
         v = self.p[:, ph] - x[:, pt]
         ok = (dot(v, v) <= self.radius * self.radius) & (dot(self.ng[:, ph], ng[:, pt]) >= MIN_NORMAL_COS)
         return pt[ok], ph[ok]
-
-
-def concat_interactions(parts: list[Interaction]) -> Interaction:
-    """One interaction of several (their caches dropped)."""
-    if len(parts) == 1:
-        return parts[0]
-    c = lambda name: np.concatenate([getattr(i, name) for i in parts], axis=-1)  # noqa: E731
-    smooth = any(i.ns is not i.ng for i in parts)
-    ng = c("ng")
-    uv = c("uv") if all(i.uv is not None for i in parts) else None
-    offset = c("offset") if all(i.offset is not None for i in parts) else None
-    return Interaction(c("d"), c("p"), ng, c("ns") if smooth else ng, uv, c("slot"), offset)
 
 
 class PhotonPass(PathMethod):
@@ -332,12 +325,12 @@ class PhotonTracer(BackwardTracer):
             state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
             state.extra["scattered"] = np.zeros(len(state), bool)
             cut += trace(pp, state, pctx, self.max_depth, probe=False)
-        ctx.store["photons_emitted"] = ctx.store.get("photons_emitted", 0) + n
-        ctx.store["photon_paths_cut"] = ctx.store.get("photon_paths_cut", 0) + cut
+        _tally(ctx, "photons_emitted", n)
+        _tally(ctx, "photon_paths_cut", cut)
         if not pp.stored:
             return None
         arrays = [np.concatenate(parts, axis=-1) for parts in zip(*pp.stored, strict=True)]
-        ctx.store["photons_stored"] = ctx.store.get("photons_stored", 0) + arrays[0].shape[1]
+        _tally(ctx, "photons_stored", arrays[0].shape[1])
         return PhotonGrid(*arrays, radius)
 
     def _gather(self, ctx, grid: PhotonGrid | None, vis: list[tuple], per_replicate: np.ndarray,
@@ -352,7 +345,7 @@ class PhotonTracer(BackwardTracer):
             by_material.setdefault(id(entry[5]), []).append(entry)
         for entries in by_material.values():
             bsdf = entries[0][5]
-            it = concat_interactions([e[0] for e in entries])
+            it = Interaction.concat([e[0] for e in entries])
             beta = np.concatenate([e[1] for e in entries], axis=1)
             owner, rep, sample = (np.concatenate([e[k] for e in entries]) for k in (2, 3, 4))
             cells, lo, hi = grid.candidates(it.p, rep)
@@ -380,7 +373,7 @@ class PhotonTracer(BackwardTracer):
                 for c in range(3):
                     gathered[c] += np.bincount(pt, weights=contrib[c], minlength=len(it))
                 per_point_found += np.bincount(pt, minlength=len(it))
-            ctx.store["photons_gathered"] = ctx.store.get("photons_gathered", 0) + gathered_pairs
+            _tally(ctx, "photons_gathered", gathered_pairs)
             if counts is not None:
                 counts.append(per_point_found)
             value = beta * gathered / (r2pi * per_replicate[rep])
@@ -400,15 +393,14 @@ class PhotonTracer(BackwardTracer):
             # No probe of paths cut at max_depth: their visibility points would need a gather of their
             # own (eye paths here run along specular chains only; the cut count is still reported).
             self.truncated += trace(self, state, ctx, self.max_depth, probe=False)
-            ctx.store["visibility_points"] = ctx.store.get("visibility_points", 0) + sum(len(v[2]) for v in self._vis)
+            _tally(ctx, "visibility_points", sum(len(v[2]) for v in self._vis))
             with ctx.timers("film"):
                 self._gather(ctx, grid, self._vis, np.maximum(per_replicate, 1), counts)
             self._vis = []
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):
-        if self.r0 is None:
-            self.reference_luminance  # noqa: B018  (the pilot sets r_0)
+        """One batch (trace_batch has run the pilot first, which sets r_0)."""
         pix = np.tile(np.arange(self.npix), REPLICATES)
         rep = np.repeat(np.arange(REPLICATES), self.npix)
         found = self._batch(ctx, pix, rep, REPLICATES, self.batch_size, self.radius(ctx.batch))
@@ -444,7 +436,6 @@ class PhotonTracer(BackwardTracer):
     def finish(self, result):
         figures = {k: int(result.extra.pop(k, 0)) for k in STORE_KEYS}
         super().finish(result)
-        result.extra.pop("exit_pupil", None)
         batches = max(result.batches, 1)
         r0 = self.r0 if self.r0 is not None else 0.0
         vis = figures["visibility_points"]

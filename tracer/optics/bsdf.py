@@ -82,6 +82,18 @@ class Interaction:
         out.cache = {k: part(v) for k, v in self.cache.items()}
         return out
 
+    @staticmethod
+    def concat(parts: list[Interaction]) -> Interaction:
+        """One interaction of several (their caches dropped)."""
+        if len(parts) == 1:
+            return parts[0]
+        c = lambda name: np.concatenate([getattr(i, name) for i in parts], axis=-1)  # noqa: E731
+        ng = c("ng")
+        ns = c("ns") if any(i.ns is not i.ng for i in parts) else ng
+        uv = c("uv") if all(i.uv is not None for i in parts) else None
+        offset = c("offset") if all(i.offset is not None for i in parts) else None
+        return Interaction(c("d"), c("p"), ng, ns, uv, c("slot"), offset)
+
 
 @dataclass
 class BSDFSample:
