@@ -5,8 +5,9 @@
 The add-on is enabled from this source tree through a temporary local extension repository (Blender
 disables it at exit, so the bpy module does not hang), the file is opened, its HUD settings are
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
-DIR receives image.exr (multilayer: Combined and the luminance pass Y, cd/m^2) and report.json,
-written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
+DIR receives image.exr (multilayer: Combined, the luminance pass Y and its standard error Y_noise,
+cd/m^2, with the hud:* header fields of the command line's image.exr) and report.json (the command
+line's report, tracer.render.build_report, with the .blend's path), written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
 the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
 kept). The report's ``run_id`` names the set. This module imports nothing from the package at import
@@ -83,8 +84,6 @@ def main(argv: list[str] | None = None) -> int:
 def _render(args, blend: Path, outputs) -> int:
     """Open ``blend``, render it with Blender's pipeline into a temporary folder and commit the
     image and the report to ``outputs`` (a locked :class:`tracer.outputs.OutputSet`)."""
-    import uuid
-
     import numpy as np
 
     from tracer.imageio import read_exr_channels
@@ -114,23 +113,32 @@ def _render(args, blend: Path, outputs) -> int:
     rendered = tmp / "render" / "image.exr"
     scene.render.filepath = str(rendered)
     scene.render.use_file_extension = False
-    bpy.ops.render.render(write_still=True)
-    figures = dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
+    engine = sys.modules[f"{module}.hud_addon.engine"]
+    engine.LAST_RENDER.clear()
+    try:
+        bpy.ops.render.render(write_still=True)
+    except RuntimeError as e:  # the engine reported an error: Blender raises it in background mode
+        if "error" not in engine.LAST_RENDER:
+            print(f"error: {str(e).splitlines()[0]}", file=sys.stderr)
+            return 1
+    figures = dict(engine.LAST_RENDER)
     for w in figures.get("warnings", []):
         print(f"warning: {w}", file=sys.stderr)
     if "error" in figures:
-        print(f"error: {figures['error']}", file=sys.stderr)
+        print(f"error: {blend.name}: {figures['error']}", file=sys.stderr)
         return 2
-    figures = {"run_id": uuid.uuid4().hex} | figures | {"blend": str(blend)}
+    figures |= {"blend": str(blend)}
     text = finite_json(figures)
     size = (scene.render.resolution_x * scene.render.resolution_percentage // 100,
             scene.render.resolution_y * scene.render.resolution_percentage // 100)
 
     def check_exr(path):
-        channels, _ = read_exr_channels(path)
+        channels, attrs = read_exr_channels(path)
         y = next((c for name, c in channels.items() if name.endswith(".Y.X") or name == "Y"), None)
         if y is None or y.shape[::-1] != size or not np.all(np.isfinite(y)):
             raise ValueError(f"expected a finite Y pass of {size[0]} x {size[1]} pixels")
+        if attrs.get("hud:run_id") != figures["run_id"]:
+            raise ValueError("the image's hud:run_id differs from the report's")
 
     try:
         outputs.commit([OutputFile("image.exr", lambda path: shutil.copyfile(rendered, path), check_exr),

@@ -1,81 +1,125 @@
 """The render engine "HUD Tracer": thin; the work is in :func:`render_final`.
 
-F12: export the scene to a temporary scene folder, load it with the tracer (the same validation as
-the command line), run the chosen method with progress (update_progress, update_stats) and cancel
-(test_break, checked each ray batch), then write Combined and a luminance pass Y into the Render
-Result and report the tracer's warnings.
+F12 (and ``blender -b file.blend -a``, frame by frame): export the depsgraph's scene at its frame to a
+temporary scene folder, load it with the tracer (the same validation as the command line), run the
+chosen method on the worker pool (Blender's Performance > Threads processes; the same image as one
+process for a budget in rays), showing the Render Result as it converges (update_result at most once
+a second), with progress (update_progress, update_stats) and cancel (test_break, checked between
+ray batches). The Render Result gets Combined (apparent luminance, cd/m^2, linear Rec.709), Y
+(cd/m^2) and Y_noise (the standard error of Y, cd/m^2), and the same hud:* fields as the command
+line's image.exr as stamp data (written into the EXR Blender saves). The command line's report
+(tracer.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
+hud-render's report.json and the HUD Readouts panel.
 """
 
 from __future__ import annotations
 
 import tempfile
+import time
 from pathlib import Path
 
 import bpy
 import numpy as np
 
-from ..tracer.errors import SceneError
+from ..tracer.errors import SceneError, TracerError
 from ..tracer.integrators import INTEGRATORS, Budget
+from ..tracer.render import render_products, run_render
 from ..tracer.scene import load_scene
 from ..tracer.units import Y_WEIGHTS
-from .export import export_scene
+from ..tracer.world import World
+from .export import blender_terms, export_scene, generated_image_warnings
 
 #: Extra passes written beside Combined: name -> (channels, channel ids, Blender pass type).
-PASSES = {"Y": (1, "X", "VALUE")}
+PASSES = {"Y": (1, "X", "VALUE"), "Y_noise": (1, "X", "VALUE")}
 
-#: Figures of the last final render (read by hud-render for its report.json).
+#: The hud:units field of Blender's EXR (its passes differ from the command line's channels).
+UNITS = ("Combined (R,G,B), Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
+         "Y_noise: standard error of Y, cd/m^2")
+
+#: The report of the last final render (tracer.render.build_report, as the command line writes it),
+#: or {"error": message} when it failed. Read by hud-render for its report.json.
 LAST_RENDER: dict = {}
+#: The last report of each scene by name: what the HUD Readouts panel shows.
+REPORTS: dict[str, dict] = {}
+
+
+def worker_count(scene) -> int:
+    """Processes for a render: Blender's Performance > Threads (auto-detect: every core)."""
+    return max(1, int(scene.render.threads))
+
+
+def write_passes(layer, image: np.ndarray, var_y: np.ndarray):
+    """Apparent luminance (H, W, 3) cd/m^2 and Y's variance (H, W) into a Render Result layer:
+    Combined (RGBA, alpha 1), Y and Y_noise; rows go bottom-up (Blender's row 0 is the bottom row),
+    contiguous float32, one foreach_set per pass."""
+    h, w = image.shape[:2]
+    flipped = image[::-1].astype(np.float32)
+    rgba = np.concatenate([flipped, np.ones((h, w, 1), np.float32)], axis=2)
+    layer.passes["Combined"].rect.foreach_set(np.ascontiguousarray(rgba).ravel())
+    y = flipped @ Y_WEIGHTS.astype(np.float32)
+    layer.passes["Y"].rect.foreach_set(np.ascontiguousarray(y, dtype=np.float32).ravel())
+    noise = np.sqrt(np.maximum(var_y[::-1], 0.0))
+    layer.passes["Y_noise"].rect.foreach_set(np.ascontiguousarray(noise, dtype=np.float32).ravel())
+
+
+def _fail(engine, message: str) -> dict:
+    engine.report({"ERROR"}, f"HUD Tracer: {message}")
+    LAST_RENDER.clear()
+    LAST_RENDER["error"] = message
+    return dict(LAST_RENDER)
 
 
 def render_final(engine, depsgraph) -> dict:
-    """Render the depsgraph's scene into ``engine``'s result. Returns figures for the caller:
-    method, rays, paths, seconds, efficiency, partial, warnings, luminance (mean, max)."""
+    """Render the depsgraph's scene into ``engine``'s result. Returns the report (or {"error": ...})."""
     scene = depsgraph.scene
     s = scene.hud
     budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds)
     with tempfile.TemporaryDirectory(prefix="hud-blender-") as tmp:
+        folder = Path(tmp) / "scene"
         try:
-            folder = export_scene(depsgraph, Path(tmp) / "scene")
+            export_scene(depsgraph, folder)
             tracer_scene = load_scene(folder)
-        except (SceneError, ValueError) as e:
-            engine.report({"ERROR"}, f"HUD Tracer: {e}")
-            LAST_RENDER.clear()
-            LAST_RENDER["error"] = str(e)
-            return dict(LAST_RENDER)
-        integrator = INTEGRATORS[s.method](tracer_scene, s.seed)
+        except SceneError as e:
+            return _fail(engine, blender_terms(e, folder, scene))
+        except ValueError as e:
+            return _fail(engine, str(e))
+        for w in generated_image_warnings(scene):
+            engine.report({"WARNING"}, f"HUD Tracer: {w}")
+        world = World(tracer_scene)
+        integrator = INTEGRATORS[s.method](world, s.seed)
+        width, height = tracer_scene.eye.resolution
+        for name, (channels, chan_id, _) in PASSES.items():
+            engine.add_pass(name, channels, chan_id)
+        rr = engine.begin_result(0, 0, width, height)
 
         def progress(fraction, message):
             engine.update_progress(fraction)
             engine.update_stats("HUD Tracer", message)
 
-        result = integrator.render(budget, progress, engine.test_break)
-    image = result.film.rgb().astype(np.float32)
-    write_result(engine, image)
-    for w in result.warnings:
+        def preview(film):
+            write_passes(rr.layers[0], film.rgb(), film.variance_y())
+            engine.update_result(rr)
+
+        t0 = time.perf_counter()
+        try:
+            result = run_render(integrator, budget, worker_count(scene), progress, engine.test_break, preview)
+            products = render_products(world, integrator, result, budget)
+        except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
+            engine.end_result(rr)
+            return _fail(engine, str(e))
+        write_passes(rr.layers[0], products.image, products.var_y)
+        engine.end_result(rr)
+        full = engine.get_result()  # stamp data belongs to the whole result, not to the part just written
+        attrs = products.attrs | {"hud:units": UNITS}
+        for key, value in attrs.items():
+            full.stamp_data_add_field(key, str(value))
+    report = products.report | {"blender": {"frame": scene.frame_current, "wall_seconds": time.perf_counter() - t0}}
+    for w in report["warnings"]:
         engine.report({"WARNING"}, f"HUD Tracer: {w}")
-    y = image @ Y_WEIGHTS.astype(np.float32)
     LAST_RENDER.clear()
-    LAST_RENDER.update({"method": result.method, "rays": result.rays, "paths": result.paths, "seconds": result.seconds,
-            "efficiency": result.efficiency, "partial": result.partial, "warnings": list(result.warnings),
-            "batches": result.batches, "seed": s.seed, "scene_hash": tracer_scene.scene_hash,
-            "luminance": {"mean": float(y.mean()), "max": float(y.max())}})
-    return dict(LAST_RENDER)
-
-
-def write_result(engine, image: np.ndarray):
-    """Apparent luminance (H, W, 3) cd/m^2 -> Combined (RGBA, alpha 1) and the Y pass; rows go
-    bottom-up (Blender's row 0 is the bottom row), contiguous float32, one foreach_set per pass."""
-    h, w = image.shape[:2]
-    for name, (channels, chan_id, _) in PASSES.items():
-        engine.add_pass(name, channels, chan_id)
-    rr = engine.begin_result(0, 0, w, h)
-    layer = rr.layers[0]
-    flipped = image[::-1]
-    rgba = np.concatenate([flipped, np.ones((h, w, 1), np.float32)], axis=2)
-    layer.passes["Combined"].rect.foreach_set(np.ascontiguousarray(rgba, dtype=np.float32).ravel())
-    y = np.ascontiguousarray(flipped @ Y_WEIGHTS.astype(np.float32), dtype=np.float32)
-    layer.passes["Y"].rect.foreach_set(y.ravel())
-    engine.end_result(rr)
+    LAST_RENDER.update(report)
+    REPORTS[scene.name] = report
+    return dict(report)
 
 
 class HudRenderEngine(bpy.types.RenderEngine):
@@ -94,5 +138,6 @@ class HudRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for name, (channels, chan_id, kind) in PASSES.items():
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+
 
 register, unregister = bpy.utils.register_classes_factory((HudRenderEngine,))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import uuid
@@ -146,10 +147,9 @@ def _image_writer(image, what: str) -> tuple[str, Callable[[Path], None]]:
     return ".exr", write
 
 
-def _mesh_arrays(obj, depsgraph, with_uv: bool):
-    """(vertices (v, 3) local Blender units, faces (f, 3), uv (v, 2) or None) of the evaluated mesh.
-    With UVs every triangle corner gets its own vertex (UV seams stay exact)."""
-    evaluated = obj.evaluated_get(depsgraph)
+def _mesh_arrays(evaluated, with_uv: bool):
+    """(vertices (v, 3) local Blender units, faces (f, 3), uv (v, 2) or None) of an evaluated object's
+    mesh (modifiers applied). With UVs every triangle corner gets its own vertex (UV seams stay exact)."""
     mesh = evaluated.to_mesh()
     try:
         mesh.calc_loop_triangles()
@@ -171,22 +171,14 @@ def _mesh_arrays(obj, depsgraph, with_uv: bool):
         evaluated.to_mesh_clear()
 
 
-def _mesh_writer(obj, depsgraph, unit_mm: float) -> Callable[[Path], None]:
-    """write(path) of an object's evaluated mesh as OBJ in millimetres (with UVs where its material
-    has an image). Raises ValueError naming the object when the mesh has no faces."""
-    with_uv = any(f.kind == "image" for f in MATERIALS[obj.hud.role].schema.fields)
-
-    def write(path: Path):
-        co, tri, uv = _mesh_arrays(obj, depsgraph, with_uv)
-        if len(tri) == 0:
-            raise ValueError(f"object {obj.name!r}: the mesh has no faces")
-        write_obj(path, co * unit_mm, tri, uv)
-
-    return write
+def _mesh_writer(co: np.ndarray, tri: np.ndarray, uv, unit_mm: float) -> Callable[[Path], None]:
+    """write(path) of a mesh's arrays as OBJ in millimetres."""
+    return lambda path: write_obj(path, co * unit_mm, tri, uv)
 
 
-def _matrix_mm(obj, unit_mm: float) -> list[list[float]]:
-    m = np.array(obj.matrix_world, dtype=np.float64)
+def _matrix_mm(matrix, unit_mm: float) -> list[list[float]]:
+    """A world matrix (Blender units) with its translation in millimetres."""
+    m = np.array(matrix, dtype=np.float64)
     m[:3, 3] *= unit_mm
     return m.tolist()
 
@@ -249,13 +241,19 @@ def methods_spec(scene) -> dict:
     return {name: schema_ui.export(scene.hud, cls.options, f"{name}_") for name, cls in INTEGRATORS.items()}
 
 
-def eye_spec(scene) -> dict:
-    """The eye from the active camera: position, gaze (-Z), up (+Y), field from lens and sensor.
-    Raises ValueError when the scene has no active camera, or one the eye cannot be (orthographic or
-    panoramic, or with a shifted lens), naming the camera (issue 11, finding 6)."""
+def eye_spec(scene, depsgraph=None) -> dict:
+    """The eye from the active camera, as ``depsgraph`` evaluates it (its frame: an animated camera
+    moves the eye): position, gaze (-Z), up (+Y), field from lens and sensor. Raises ValueError when
+    the scene has no active camera, or one the eye cannot be (orthographic or panoramic, or with a
+    shifted lens), naming the camera (issue 11, finding 6)."""
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
         raise ValueError("the scene needs an active camera: it is the eye")
+    # Geometry and lens as evaluated; the HUD settings from the original (properties set from Python do
+    # not always reach the evaluated copy).
+    hud = cam.original.data.hud
+    if depsgraph is not None:
+        cam = cam.evaluated_get(depsgraph)
     unit_mm = _unit_mm(scene)
     r = scene.render
     w = max(1, int(r.resolution_x * r.resolution_percentage / 100))
@@ -277,15 +275,15 @@ def eye_spec(scene) -> dict:
         fy, fx = half, math.atan(math.tan(half) * w / h)
     mw = np.array(cam.matrix_world, dtype=np.float64)
     rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)
-    acc = cd.hud.accommodation_distance_mm
+    acc = hud.accommodation_distance_mm
     eye = {"position": (mw[:3, 3] * unit_mm).tolist(), "gaze": (-rot[:, 2]).tolist(), "up": rot[:, 1].tolist(),
-           "pupil_diameter_mm": cd.hud.pupil_diameter_mm, "focal_length_mm": cd.hud.focal_length_mm,
+           "pupil_diameter_mm": hud.pupil_diameter_mm, "focal_length_mm": hud.focal_length_mm,
            "accommodation_distance_mm": acc if acc > 0 else "infinity",
            "resolution": [w, h], "fov_deg": [math.degrees(2 * fx), math.degrees(2 * fy)]}
-    if cd.hud.pupil == "AUTO":
-        eye.update(pupil_diameter_mm="auto", observer_age=cd.hud.observer_age)
-        if cd.hud.adaptation_luminance > 0:
-            eye["adaptation_luminance_cd_m2"] = cd.hud.adaptation_luminance
+    if hud.pupil == "AUTO":
+        eye.update(pupil_diameter_mm="auto", observer_age=hud.observer_age)
+        if hud.adaptation_luminance > 0:
+            eye["adaptation_luminance_cd_m2"] = hud.adaptation_luminance
     return eye
 
 
@@ -305,13 +303,13 @@ def environment_spec(scene, plan: _Plan) -> dict:
             "calibration": {"mode": h.calibration, "value": h.value}, "rotation_deg": h.rotation_deg}
 
 
-def _mesh_stems(objects) -> dict[str, str]:
-    """A unique mesh file stem per object name (see _FileNames). Objects whose names are already
-    clean claim first, then the others, each group by name: "m_a" keeps m_a, "m.a" gets m_a-2,
-    whatever the order of the objects in the scene."""
+def _mesh_stems(items) -> dict[str, str]:
+    """A unique file stem per exported object name (see _FileNames). Names that are already clean
+    claim first, then the others, each group by name: "m_a" keeps m_a, "m.a" gets m_a-2, whatever the
+    order of the objects in the scene."""
     names = _FileNames()
-    order = sorted(objects, key=lambda o: (bpy.path.clean_name(o.name) != o.name, o.name))
-    return {o.name: names.claim(o.name) for o in order}
+    order = sorted((i.name for i in items), key=lambda n: (bpy.path.clean_name(n) != n, n))
+    return {n: names.claim(n) for n in order}
 
 
 def _image_fields(block: dict, fields) -> list[str]:
@@ -392,6 +390,80 @@ def render_visible(view_layer) -> set[str]:
     return names
 
 
+class _Item:
+    """One exported object: the original (its HUD settings), its name in scene.json, its world matrix
+    and the key of its mesh (instances of one mesh share it)."""
+
+    def __init__(self, original, name: str, matrix, mesh_key):
+        self.original, self.name, self.matrix, self.mesh_key = original, name, matrix, mesh_key
+
+
+def _needs_uv(obj) -> bool:
+    return any(f.kind == "image" for f in MATERIALS[obj.hud.role].schema.fields)
+
+
+def _role_on_non_mesh(obj):
+    raise ValueError(f"object {obj.name!r}: has the optical role {obj.hud.role!r} but is a {obj.type.title()}, not a "
+                     "mesh: convert it (Object > Convert > Mesh) or set its role to None")
+
+
+def exported_objects(depsgraph) -> tuple[list[_Item], dict]:
+    """The objects with an optical role that ``depsgraph`` shows, as evaluated (issue 11, finding 2):
+    at the depsgraph's frame (animation), with modifiers applied, and with every instance
+    (collection instances, geometry-node and particle instances) as an object of its own, named
+    "<object> @ <instancer> <k>". Returns the items and {mesh key: (vertices, faces, uv) in Blender
+    units}, extracted now (an instance's evaluated data lives only while the depsgraph is iterated).
+
+    Visibility is Blender's for renders: a render depsgraph (F12, hud-render, ``blender -a``) holds
+    what the render shows; for the viewport's depsgraph (the export operator), objects disabled in
+    renders or in collections disabled in renders or excluded are left out, and objects hidden only
+    in the viewport are added (:func:`render_visible`). Raises ValueError naming an object with a role
+    that is not a mesh, or whose mesh has no faces."""
+    scene = depsgraph.scene
+    visible = None if depsgraph.mode == "RENDER" else render_visible(depsgraph.view_layer)
+    items: list[_Item] = []
+    meshes: dict = {}
+    counts: dict = {}
+    seen: set[str] = set()
+
+    def mesh_of(evaluated, original) -> object:
+        key = (evaluated.data.as_pointer() if evaluated.data is not None else id(evaluated), _needs_uv(original))
+        if key not in meshes:
+            co, tri, uv = _mesh_arrays(evaluated, key[1])
+            if len(tri) == 0:
+                raise ValueError(f"object {original.name!r}: the mesh has no faces")
+            meshes[key] = (co, tri, uv)
+        return key
+
+    for inst in depsgraph.object_instances:
+        original = inst.object.original
+        if original.hud.role == "none":
+            continue
+        owner = inst.parent.original if inst.is_instance and inst.parent is not None else original
+        if visible is not None and owner.name not in visible:
+            continue
+        if inst.object.type != "MESH":
+            _role_on_non_mesh(original)
+        if inst.is_instance:
+            k = counts[(original.name, owner.name)] = counts.get((original.name, owner.name), 0) + 1
+            name = f"{original.name} @ {owner.name} {k}"
+        else:
+            name = original.name
+            seen.add(name)
+        items.append(_Item(original, name, inst.matrix_world.copy(), mesh_of(inst.object, original)))
+    if visible is not None:  # hidden in the viewport only: not in the viewport's depsgraph, but rendered
+        for obj in scene.objects:
+            if obj.name in visible and obj.name not in seen and obj.hud.role != "none" and obj.type != "EMPTY":
+                if obj.type != "MESH":
+                    _role_on_non_mesh(obj)
+                items.append(_Item(obj, obj.name, obj.matrix_world.copy(), mesh_of(obj.evaluated_get(depsgraph), obj)))
+    names = [i.name for i in items]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"object {dup[0]!r}: two exported objects have this name (rename the object)")
+    return items, meshes
+
+
 def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = None) -> Path:
     """Write the scene folder for ``depsgraph``'s scene into ``folder``; returns ``folder``.
 
@@ -419,22 +491,20 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     _check_replaceable(target)
     unit_mm = _unit_mm(scene)
     plan = _Plan()
-    eye = eye_spec(scene)
+    eye = eye_spec(scene, depsgraph)
     environment = environment_spec(scene, plan)
-    rendered = render_visible(depsgraph.view_layer)
-    for obj in scene.objects:  # a role on a text, curve or surface would be silently lost
-        if obj.type != "MESH" and obj.hud.role != "none" and obj.name in rendered:
-            raise ValueError(f"object {obj.name!r}: has the optical role {obj.hud.role!r} but is a {obj.type.title()}, "
-                             "not a mesh: convert it (Object > Convert > Mesh) or set its role to None")
-    exported = [obj for obj in scene.objects
-                if obj.type == "MESH" and obj.hud.role != "none" and obj.name in rendered]
-    stems = _mesh_stems(exported)
+    items, meshes = exported_objects(depsgraph)
+    stems = _mesh_stems(items)
+    mesh_files: dict = {}
     objects = []
-    for obj in exported:
-        stem = stems[obj.name]
-        rel = plan.add(f"meshes/{stem}.obj", _mesh_writer(obj, depsgraph, unit_mm))
-        entry = {"name": obj.name, "mesh": rel, "transform": {"matrix": _matrix_mm(obj, unit_mm)},
-                 "material": material_spec(obj, plan, stem)}
+    for item in items:
+        obj = item.original
+        if item.mesh_key not in mesh_files:
+            co, tri, uv = meshes[item.mesh_key]
+            mesh_files[item.mesh_key] = plan.add(f"meshes/{stems[item.name]}.obj", _mesh_writer(co, tri, uv, unit_mm))
+        entry = {"name": item.name, "mesh": mesh_files[item.mesh_key],
+                 "transform": {"matrix": _matrix_mm(item.matrix, unit_mm)},
+                 "material": material_spec(obj, plan, stems[item.name])}
         if obj.hud.smooth_normals:
             entry["smooth_normals"] = True
         emission = emission_spec(obj)
@@ -464,3 +534,76 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
         print(f"HUD export: written to {target}, but the earlier export's copy {leftover} could not be removed",
               file=sys.stderr)
     return Path(folder)
+
+
+#: The export's own relative file names at the start of a tracer message ("'textures/x.exr': ...").
+_EXPORT_FILE = re.compile(r"^'?(?:textures|meshes)/[^':]*'?:\s*")
+
+
+def _image_hint(image) -> str:
+    if image is not None and image.source == "GENERATED" and image.packed_file is None:
+        return (f" (image {image.name!r} is a generated image that is not packed: Blender does not save its pixels "
+                "with the .blend and regenerates them when the file is opened; pack it with Image > Pack, or save it "
+                "to a file)")
+    return ""
+
+
+def blender_terms(error, folder: Path, scene) -> str:
+    """A tracer SceneError about an exported scene folder, in Blender's terms: the object, World or
+    camera and the property at fault instead of the temporary scene.json and its JSON path (issue 11,
+    finding 4), with a hint where a generated image lost its pixels."""
+    try:
+        data = json.loads((Path(folder) / "scene.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        data = {}
+    field, message = error.field, _EXPORT_FILE.sub("", error.message)
+    m = re.match(r"objects\[(\d+)\](?:\.(\w+))?(?:\.(\w+))?", field)
+    hint = ""
+    if m and int(m.group(1)) < len(data.get("objects", [])):
+        entry = data["objects"][int(m.group(1))]
+        name, block, key = entry["name"], m.group(2), m.group(3)
+        original = bpy.data.objects.get(name.split(" @ ")[0])
+        where = f"object {name!r}"
+        if block == "material" and key:
+            schema = MATERIALS[entry["material"]["type"]].schema
+            f = next((f for f in schema.fields if f.name == key), None)
+            where += f": {f.title if f else key}"
+            if f is not None and f.kind == "image" and original is not None:
+                hint = _image_hint(getattr(original.hud, key, None))
+        elif block == "emission":
+            where += f": emission{': ' + key if key else ''}"
+        elif block:
+            where += f": {block}"
+    elif field.startswith("environment"):
+        world = scene.world
+        image = world.hud.image if world is not None else None
+        where = f"World {world.name!r}" if world is not None else "World"
+        if image is not None:
+            where += f": HDRI image {image.name!r}"
+            hint = _image_hint(image)
+    elif field.startswith("eye"):
+        where = f"camera {scene.camera.name!r}" if scene.camera is not None else "camera"
+    elif field.startswith("methods."):
+        method, _, option = field[len("methods."):].partition(".")
+        where = f"Render Properties > HUD Tracer > {method.capitalize()} options{': ' + option if option else ''}"
+    else:
+        where = field or "scene"
+    return f"{where}: {message}{hint}"
+
+
+def generated_image_warnings(scene) -> list[str]:
+    """Images the render uses whose pixels will not survive saving and opening the .blend again: generated
+    images that are neither packed nor saved, but were painted or filled (their pixels differ from what
+    Blender would regenerate)."""
+    images = []
+    if scene.world is not None and scene.world.hud.kind == "hdri" and scene.world.hud.image is not None:
+        images.append(("World: HDRI", scene.world.hud.image))
+    for obj in scene.objects:
+        if obj.hud.role != "none":
+            for f in MATERIALS[obj.hud.role].schema.fields:
+                img = getattr(obj.hud, f.name, None) if f.kind == "image" else None
+                if img is not None:
+                    images.append((f"object {obj.name!r}: {f.title}", img))
+    return [f"{what} image {img.name!r} is generated and not packed: its pixels are lost when the .blend is saved "
+            "and opened again; pack it (Image > Pack) or save it to a file"
+            for what, img in images if img.source == "GENERATED" and img.packed_file is None and img.is_dirty]

@@ -69,7 +69,7 @@ def scenario_install_render(zip_path, out, preset, method, rays, seed):
     figures = render_preset(module, Path(out), preset, method, int(rays), int(seed))
     disable(module)
     return {"module": module, "enabled": enabled, "figures": figures, "left_after_disable": hud_names(),
-            "panels": panels, "panels_after_disable": panels_with_engine()}
+            "panels": panels, "panels_after_disable": panels_with_engine(), "threads": bpy.context.scene.render.threads}
 
 
 def scenario_roundtrip(out):
@@ -195,6 +195,72 @@ def scenario_visibility(out):
     bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
     disable(module)
     return {}
+
+
+def scenario_animation(out):
+    """A camera keyframed at x = -50, 0, +50 mm over frames 1-3 (issue 11, finding 2): Blender's own
+    animation render (``render(animation=True)``, as ``blender -b file.blend -a``) writes one EXR per
+    frame, each exported from the depsgraph at its frame."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    scene = bpy.context.scene
+    unit_mm = 1000.0 * scene.unit_settings.scale_length
+    cam = scene.camera
+    x0 = cam.location.x
+    for frame, dx_mm in ((1, -50.0), (2, 0.0), (3, 50.0)):
+        cam.location.x = x0 + dx_mm / unit_mm
+        cam.keyframe_insert("location", index=0, frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.hud.method, scene.hud.budget, scene.hud.rays, scene.hud.seed = "backward", "RAYS", 300_000, 3
+    s = scene.render.image_settings
+    s.file_format, s.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(Path(out) / "frame_####")
+    engine_mod = sys.modules[f"{module}.hud_addon.engine"]
+    eyes = {}
+
+    def remember(scene_, depsgraph=None):
+        eyes[scene_.frame_current] = dict(engine_mod.LAST_RENDER).get("run_id")
+
+    bpy.app.handlers.render_post.append(remember)
+    bpy.ops.render.render(animation=True)
+    bpy.app.handlers.render_post.remove(remember)
+    exported = {}
+    for frame in (1, 2, 3):  # the export operator at each frame (the viewport's depsgraph)
+        scene.frame_set(frame)
+        bpy.ops.hud.export_scene(directory=str(Path(out) / f"scene_{frame}"))
+        exported[frame] = json.loads((Path(out) / f"scene_{frame}" / "scene.json").read_text())["eye"]["position"]
+    disable(module)
+    return {"x0_mm": x0 * unit_mm, "run_ids": eyes, "exported_eye_mm": exported,
+            "files": sorted(p.name for p in Path(out).glob("frame_*.exr"))}
+
+
+def scenario_instances(out):
+    """Collection instances and an object hidden from renders (issue 11, finding 2): a mirror in a
+    collection excluded from the view layer, instanced by two empties, exports as two mirrors at the
+    instances' places; a third instance disabled in renders is left out."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = 0.001  # 1 Blender unit = 1 mm
+    coll = bpy.data.collections.new("optics")
+    scene.collection.children.link(coll)
+    bpy.ops.mesh.primitive_plane_add(size=20.0, location=(0.0, 0.0, 0.0))
+    mirror = bpy.context.object
+    mirror.name = "mirror"
+    mirror.hud.role, mirror.hud.reflectance = "mirror", (0.9, 0.9, 0.9)
+    for c in list(mirror.users_collection):
+        c.objects.unlink(mirror)
+    coll.objects.link(mirror)
+    bpy.context.view_layer.layer_collection.children[coll.name].exclude = True
+    places = {"inst_a": (100.0, 0.0, 0.0), "inst_b": (0.0, 200.0, 0.0), "inst_hidden": (0.0, 0.0, 300.0)}
+    for name, loc in places.items():
+        empty = bpy.data.objects.new(name, None)
+        empty.instance_type, empty.instance_collection = "COLLECTION", coll
+        empty.location = loc
+        scene.collection.objects.link(empty)
+    bpy.data.objects["inst_hidden"].hide_render = True
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    disable(module)
+    return {"places": places}
 
 
 def scenario_tooltips():
@@ -360,6 +426,7 @@ class StubEngine:
 
     def __init__(self, stop_after):
         self.stop_after, self.calls, self.progress, self.reports, self.passes = stop_after, 0, [], [], {}
+        self.updates, self.stamps = 0, {}
 
     def test_break(self):
         self.calls += 1
@@ -381,28 +448,60 @@ class StubEngine:
         class Layer:
             passes = {"Combined": _Pass(4, w * h), **{k: _Pass(c, w * h) for k, c in self.passes.items()}}
 
+        stamps = self.stamps
+
         class Result:
             layers = [Layer()]
 
+            @staticmethod
+            def stamp_data_add_field(key, value):
+                stamps[key] = value
+
         self.result = Result()
+        return self.result
+
+    def update_result(self, rr):
+        self.updates += 1
+
+    def get_result(self):
         return self.result
 
     def end_result(self, rr):
         pass
 
 
-def scenario_cancel():
+def scenario_cancel(threads):
+    """A 600 s render cancelled at the second test_break, on ``threads`` processes."""
+    import time
+
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     bpy.ops.hud.add_preset(preset="hud-direct")
     scene = bpy.context.scene
     scene.hud.method, scene.hud.budget, scene.hud.seconds = "forward", "SECONDS", 600.0
+    scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
     engine_mod = sys.modules[f"{module}.hud_addon.engine"]
     stub = StubEngine(stop_after=1)
+    t0 = time.perf_counter()
     figures = engine_mod.render_final(stub, bpy.context.evaluated_depsgraph_get())
-    combined = stub.result.layers[0].passes["Combined"].values
-    y = stub.result.layers[0].passes["Y"].values
+    seconds = time.perf_counter() - t0
+    passes = stub.result.layers[0].passes
     disable(module)
-    return {"figures": figures, "test_break_calls": stub.calls, "combined_sample": combined, "y_sample": y}
+    return {"figures": figures, "test_break_calls": stub.calls, "seconds": seconds,
+            "samples": {k: passes[k].values for k in ("Combined", "Y", "Y_noise")}}
+
+
+def scenario_progressive(seconds):
+    """A render of ``seconds`` with Blender's default Performance > Threads (auto-detect): the number of
+    processes, and how often the Render Result was updated while it ran."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    scene.hud.method, scene.hud.budget, scene.hud.seconds = "backward", "SECONDS", float(seconds)
+    stub = StubEngine(stop_after=10**9)
+    report = sys.modules[f"{module}.hud_addon.engine"].render_final(stub, bpy.context.evaluated_depsgraph_get())
+    disable(module)
+    return {"workers": report["workers"], "batches": report["batches"], "seconds": report["seconds"],
+            "updates": stub.updates, "threads_mode": scene.render.threads_mode, "cpus": os.cpu_count()}
 
 
 def scenario_light_paths():

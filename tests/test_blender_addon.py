@@ -67,13 +67,24 @@ def test_installed_extension_renders_like_the_tracer(extension_zip, tmp_path, me
     np.testing.assert_allclose(ch["ViewLayer.Y.X"], y_blender, rtol=1e-5, atol=1e-4)
     y_tracer, var, result = render(tmp_path / "scene", method, rays, seed=7)
     assert y_blender.shape == y_tracer.shape
+    # Blender renders on a pool of Performance > Threads processes; for a budget in rays that is the
+    # same image as the tracer's one-process render of the exported folder (seed-addressed batches), to
+    # float32 rounding, and its noise pass is the standard error the tracer reports.
+    assert res["figures"]["workers"] == res["threads"] and res["figures"]["rays"] == result.rays
+    np.testing.assert_allclose(y_blender, y_tracer, rtol=1e-5, atol=1e-6 * y_tracer.max())
+    np.testing.assert_allclose(ch["ViewLayer.Y_noise.X"], np.sqrt(var), rtol=1e-4, atol=1e-6 * np.sqrt(var).max())
     covered = (y_tracer > 425) & (y_blender > 425)
     assert covered.sum() > 100
     sem = math.sqrt(var[covered].sum()) / covered.sum()
-    diff = y_blender[covered].mean() - y_tracer[covered].mean()
-    assert abs(diff) < z_bound(2) * math.sqrt(2) * sem
-    assert abs(y_blender[covered].mean() - 850.0) < z_bound(2) * sem + 0.01 * 850
-    assert res["figures"]["rays"] == result.rays or abs(res["figures"]["rays"] - result.rays) < 0.2 * rays
+    assert abs(y_blender[covered].mean() - 850.0) < z_bound(1) * sem + 0.01 * 850
+    # The hud:* fields of the command line's image.exr are in the header of the EXR Blender wrote.
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(tmp_path / "blender.exr"))
+    header = {a.name: a.value for a in inp.spec().extra_attribs}
+    inp.close()
+    assert header["hud:method"] == method and header["hud:run_id"] == res["figures"]["run_id"]
+    assert int(header["hud:rays"]) == result.rays and "Y_noise" in header["hud:units"]
 
 
 def test_export_round_trip(tmp_path):
@@ -123,13 +134,19 @@ def test_export_round_trip(tmp_path):
     assert sc.eye.pupil_diameter_mm == pytest.approx(2.61, abs=0.006)  # Watson & Yellott at 292 cd/m^2
 
 
-def test_cancel_stops_within_one_batch_and_writes_a_clean_result():
-    res, _ = scenario("cancel")
+@pytest.mark.parametrize("threads", [1, 2])
+def test_cancel_stops_within_one_batch_and_writes_a_clean_result(threads):
+    """Esc in a 600 s render: the render stops at the next check of test_break, within a batch, with a
+    clean partial result (every pass finite). On one process the first check lets one batch run; on a
+    pool the workers finish the batches in flight and nothing that came later is merged."""
+    res, _ = scenario("cancel", threads)
     f = res["figures"]
-    assert f["partial"] is True and f["batches"] == 1
-    assert res["test_break_calls"] == 2  # checked before each batch: one batch ran, the second check stopped it
-    assert res["combined_sample"] and all(math.isfinite(v) for v in res["combined_sample"])
-    assert all(math.isfinite(v) for v in res["y_sample"])
+    assert f["partial"] is True and f["batches"] <= 1 and f["workers"] == threads
+    if threads == 1:
+        assert f["batches"] == 1 and res["test_break_calls"] == 2  # one batch ran, the second check stopped it
+    assert res["seconds"] < 30
+    for name, values in res["samples"].items():
+        assert values and all(math.isfinite(v) for v in values), name
 
 
 def test_unregister_leaves_nothing_behind_and_the_process_exits():
@@ -173,6 +190,15 @@ def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and ("--seconds" in lines[0] or str(out) in lines[0])
+
+
+def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
+    """Issue 11, finding 7: with Blender's default threads (auto-detect) a render runs on one process per
+    core, and the Render Result is updated while it runs (at most once a second, after merged batches)."""
+    res, _ = scenario("progressive", 6)
+    assert res["threads_mode"] == "AUTO" and res["workers"] == res["cpus"]
+    assert res["batches"] > 3
+    assert 2 <= res["updates"] <= res["seconds"] + 1
 
 
 def test_show_light_paths_draws_paths_that_end_at_the_eye():
@@ -283,3 +309,41 @@ def test_every_property_has_a_tooltip():
     res, _ = scenario("tooltips")
     assert len(res["groups"]) >= 3, res["groups"]
     assert res["missing"] == [], res["missing"]
+
+
+def test_an_animated_camera_renders_each_frame_from_its_own_eye(tmp_path):
+    """Issue 11, finding 2: with the camera keyframed at x = -50, 0, +50 mm, Blender's animation render
+    gives three different frames, each the tracer's render from that frame's eye: the mirror image
+    of the panel moves across the retina, and the export operator writes that frame's eye."""
+    res, _ = scenario("animation", tmp_path)
+    assert res["files"] == ["frame_0001.exr", "frame_0002.exr", "frame_0003.exr"]
+    x0 = res["x0_mm"]
+    for frame, dx in (("1", -50.0), ("2", 0.0), ("3", 50.0)):
+        assert res["exported_eye_mm"][frame][0] == pytest.approx(x0 + dx, abs=1e-3)
+    assert len(set(res["run_ids"].values())) == 3  # three renders, one per frame
+    centroids = []
+    for name in res["files"]:
+        y = read_multilayer(tmp_path / name)["ViewLayer.Y.X"]
+        lit = y > 0.5 * y.max()
+        centroids.append(np.nonzero(lit)[1].mean())
+    # The eye moves right: the panel's edge, seen in the mirror, moves across the image, each frame
+    # by the same number of pixels (the same 50 mm step), well beyond a pixel.
+    steps = np.diff(centroids)
+    assert abs(steps[0]) > 1 and np.sign(steps[0]) == np.sign(steps[1])
+    assert steps[1] == pytest.approx(steps[0], rel=0.2)
+
+
+def test_collection_instances_export_as_objects_and_hide_render_is_honoured(tmp_path):
+    """Issue 11, finding 2: each instance of a collection becomes an object of its own at the instance's
+    place, even though the collection itself is excluded; an instancer disabled in renders is not."""
+    res, _ = scenario("instances", tmp_path)
+    from tracer.scene import load_scene
+
+    data = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    names = sorted(o["name"] for o in data["objects"])
+    assert names == ["mirror @ inst_a 1", "mirror @ inst_b 1"]
+    assert len({o["mesh"] for o in data["objects"]}) == 1  # instances share one mesh file
+    sc = load_scene(tmp_path / "scene")
+    for name, inst in (("mirror @ inst_a 1", "inst_a"), ("mirror @ inst_b 1", "inst_b")):
+        np.testing.assert_allclose(sc.object(name).vertices.mean(axis=0), res["places"][inst], atol=1e-6)
+        assert sc.object(name).area_mm2 == pytest.approx(400.0)

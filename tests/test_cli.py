@@ -193,3 +193,61 @@ def test_dask_cluster_gives_the_same_image(preset):
     with cluster, distributed.Client(cluster) as client:
         dask = render_dask(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=2_000_000), client)
     assert dask.batches == one.batches and films_match(one, dask)
+
+
+def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(preset, tmp_path):
+    """Inside Blender the tracer is bl_ext.<repository>.hud_tracer.tracer, under packages Blender makes
+    up at run time, which a plain interpreter cannot import. Here a copy of the tracer is imported the
+    same way (an empty package "hud_made_up" over a folder that links to this checkout): its workers
+    start, and the image equals the one-process render of the ordinary tracer. Its main module is
+    hidden from the workers (this test process's own would be pytest's)."""
+    import importlib
+    import types
+
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import films_match
+    from tracer.scene import load_scene
+
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "hud_tracer").symlink_to(ROOT, target_is_directory=True)
+    made_up = types.ModuleType("hud_made_up")
+    made_up.__path__ = [str(repo)]
+    sys.modules["hud_made_up"] = made_up
+    try:
+        parallel = importlib.import_module("hud_made_up.hud_tracer.tracer.parallel")
+        integrators = importlib.import_module("hud_made_up.hud_tracer.tracer.integrators")
+        scene_mod = importlib.import_module("hud_made_up.hud_tracer.tracer.scene")
+        assert parallel._made_up_packages() == [("hud_made_up", [str(repo)])]
+        folder = preset("analytic-mirror")
+        previews = []
+        two = parallel.render_parallel(integrators.INTEGRATORS["backward"](scene_mod.load_scene(folder), 5),
+                                       integrators.Budget(rays=800_000), workers=2,
+                                       preview=lambda film: previews.append(film.replicates))
+        assert type(two).__module__ == "hud_made_up.hud_tracer.tracer.integrators.base"
+    finally:
+        for name in [n for n in sys.modules if n == "hud_made_up" or n.startswith("hud_made_up.")]:
+            del sys.modules[name]
+    one = INTEGRATORS["backward"](load_scene(folder), 5).render(Budget(rays=800_000))
+    assert one.batches == two.batches > 1 and films_match(one, two)
+    # The preview saw the film while it grew (at most once a second: at least the first merge).
+    assert previews and previews == sorted(previews) and previews[-1] < two.film.replicates
+
+
+def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tmp_path):
+    """A worker whose world cannot be built (its scene folder is gone) says why, and the render stops
+    with that message instead of waiting for workers that the pool would start again and again."""
+    import shutil
+    import time
+
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("analytic-mirror")
+    integrator = INTEGRATORS["backward"](load_scene(folder), 1)
+    shutil.rmtree(folder)
+    t0 = time.perf_counter()
+    with pytest.raises(RuntimeError, match="could not start: SceneError: .*scene.json: scene file not found"):
+        render_parallel(integrator, Budget(rays=100_000), workers=2)
+    assert time.perf_counter() - t0 < 60

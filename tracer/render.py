@@ -15,6 +15,7 @@ import json
 import math
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -359,6 +360,69 @@ def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarr
             OutputFile("report.json", lambda p: Path(p).write_text(report_text), check_report)]
 
 
+def run_render(integrator, budget: Budget, workers: int = 1, progress=None, should_stop=None,
+               preview=None) -> RenderResult:
+    """Run ``integrator`` for ``budget`` on ``workers`` processes (tracer.parallel) or in this one:
+    the command line's render and Blender's, with the two callables of the seam (``progress``,
+    ``should_stop``) and the optional ``preview(film)`` (tracer.integrators.base.drive). Raises
+    FloatingPointError if the estimate holds NaN or Inf (a bug: the estimators never make them)."""
+    if workers > 1:
+        result = render_parallel(integrator, budget, workers, progress, should_stop, preview)
+    else:
+        result = integrator.render(budget, progress, should_stop, preview)
+    if not (np.all(np.isfinite(result.film.rgb())) and np.all(np.isfinite(result.film.variance_y()))):
+        raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
+    return result
+
+
+@dataclass
+class Products:
+    """What a render gives its user, the same from the command line and from Blender: the image
+    (H, W, 3) cd/m^2 linear Rec.709, Y and its variance (H, W), the preview (sRGB uint8, Ward 1994),
+    the report (:func:`build_report`, with ``run_id``), the EXR's channels and header attributes
+    (``hud:*``). ``files()`` are the command line's three output files."""
+
+    image: np.ndarray
+    y: np.ndarray
+    var_y: np.ndarray
+    preview: np.ndarray
+    report: dict
+    channels: dict
+    attrs: dict
+
+    def files(self) -> list[OutputFile]:
+        return output_files(self.channels, self.attrs, self.preview, self.report)
+
+
+def render_products(world: World, integrator, result: RenderResult, budget: Budget, analyse: bool = True) -> Products:
+    """The image, report and EXR contents of a finished render (see :class:`Products`). The
+    brightness-theorem analysis and the HUD figures run unless ``analyse`` is false or the render was
+    stopped early (``result.partial``: a stop must end promptly); their time is not part of the budget."""
+    scene = world.scene
+    image = result.film.rgb()
+    var_y = result.film.variance_y()
+    y = luminance(image)
+    preview, info = tonemap_ward(image, adaptation_luminance(y))
+    analysis = figures = None
+    if analyse and world.accel is not None and not result.partial:
+        t0 = time.perf_counter()
+        analysis = brightness_theorem(world, y, var_y, type(integrator).renders_environment)
+        analysis["seconds"] = time.perf_counter() - t0
+        figures = hud_figures(world, y)
+    report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
+    report["hud"] = figures
+    run_id = uuid.uuid4().hex
+    report = {"run_id": run_id} | report
+    attrs = {"hud:method": result.method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
+             "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency),
+             "hud:seed": str(result.seed), "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
+             "hud:run_id": run_id,
+             "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
+                          "Y_var: (cd/m^2)^2"}
+    channels = {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y}
+    return Products(image, y, var_y, preview, report, channels, attrs)
+
+
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
                  progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
                  workers: int = 1):
@@ -377,38 +441,13 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     try:
         world = World(scene)
         integrator = INTEGRATORS[method](world, seed, batch_size)
-        if workers > 1:
-            result = render_parallel(integrator, budget, workers, progress, should_stop)
-        else:
-            result = integrator.render(budget, progress, should_stop)
-        image = result.film.rgb()
-        var_y = result.film.variance_y()
-        if not (np.all(np.isfinite(image)) and np.all(np.isfinite(var_y))):
-            raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
-        y = luminance(image)
-        preview, info = tonemap_ward(image, adaptation_luminance(y))
-        analysis = figures = None
-        if analyse and world.accel is not None and not result.partial:
-            t0 = time.perf_counter()
-            analysis = brightness_theorem(world, y, var_y, INTEGRATORS[method].renders_environment)
-            analysis["seconds"] = time.perf_counter() - t0  # after the budget: not part of it
-            figures = hud_figures(world, y)
-        report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
-        report["hud"] = figures
-        run_id = uuid.uuid4().hex
-        report = {"run_id": run_id} | report
-        attrs = {"hud:method": method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
-                 "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency),
-                 "hud:seed": str(seed), "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
-                 "hud:run_id": run_id,
-                 "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
-                              "Y_var: (cd/m^2)^2"}
-        channels = {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y}
-        outputs.commit(output_files(channels, attrs, preview, report))
+        result = run_render(integrator, budget, workers, progress, should_stop)
+        products = render_products(world, integrator, result, budget, analyse)
+        outputs.commit(products.files())
         outputs.keep()
     finally:
         outputs.close()
-    return report, result
+    return products.report, result
 
 
 def render_folder(scene_dir, method, budget, seed, out_dir, **kw):

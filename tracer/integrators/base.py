@@ -8,7 +8,9 @@ the Blender add-on), its film components, and traces one batch at a time on the 
 Batches are seed-addressed: batch k draws its random numbers from ``make_rng(seed, k)`` only and
 fills its own film, whose sums merge exactly, so the same seeds give the same image however batches
 are distributed (over processes, over machines). Progress and cancellation cross into the tracer as
-two callables, ``progress(fraction, message)`` and ``should_stop()``, checked between batches.
+two callables, ``progress(fraction, message)`` and ``should_stop()``, checked between batches; a
+viewer that shows the image while it converges (Blender's Render Result) may pass a third,
+``preview(film)``, called with the merged film at most every :data:`PREVIEW_SECONDS`.
 """
 
 from __future__ import annotations
@@ -55,6 +57,10 @@ SMALLEST_BATCH = 1 << 10
 
 Progress = Callable[[float, str], None]
 ShouldStop = Callable[[], bool]
+Preview = Callable[[Film], None]
+#: A ``preview`` callable is given the merged film at most this often (seconds of wall time), so that
+#: showing it costs a small share of the render.
+PREVIEW_SECONDS = 1.0
 
 #: The option every method has.
 MAX_DEPTH = Field("max_depth", "int", 32, minimum=1, maximum=1000, label="Max depth",
@@ -254,13 +260,13 @@ class Integrator:
         return BatchResult(index, film.arrays(), paths, found, self.world.rays_traced - rays_before,
                            self.truncated - truncated_before, seconds, timers.report(seconds), dict(ctx.store))
 
-    def render(self, budget: Budget, progress: Progress | None = None,
-               should_stop: ShouldStop | None = None) -> RenderResult:
+    def render(self, budget: Budget, progress: Progress | None = None, should_stop: ShouldStop | None = None,
+               preview: Preview | None = None) -> RenderResult:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
         started = time.perf_counter()
         self.fit_batch(budget)
-        return drive(self, budget, LocalExecutor(self), 1, progress, should_stop, started=started)
+        return drive(self, budget, LocalExecutor(self), 1, progress, should_stop, started=started, preview=preview)
 
     def merge_extra(self, total: dict, batch: dict):
         """Fold a batch's ``extra`` figures into the render's (default: add numbers)."""
@@ -333,7 +339,8 @@ class LocalExecutor:
 
 
 def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress: Progress | None = None,
-          should_stop: ShouldStop | None = None, label: str = "", started: float | None = None) -> RenderResult:
+          should_stop: ShouldStop | None = None, label: str = "", started: float | None = None,
+          preview: Preview | None = None) -> RenderResult:
     """Hand out batch indices in increasing order to ``executor`` (``submit(k)`` -> handle,
     ``wait(handles, timeout)`` -> indices done, ``result(handle)`` -> BatchResult), keep at most
     ``in_flight`` running, and merge the contiguous prefix of finished batches in batch order until
@@ -346,7 +353,9 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     budget is met, batches still running are dropped, not awaited; but at least one batch is merged,
     however short the budget, so that an image is never empty for lack of time. A time budget counts
     from ``started`` (``time.perf_counter()`` when the render began: the pilot and the workers'
-    start-up are part of the wall time the user gave), by default from now."""
+    start-up are part of the wall time the user gave), by default from now. ``preview(film)`` is
+    called with the merged film after a merge, at most every :data:`PREVIEW_SECONDS` (not after the
+    last: the caller has the result)."""
     method = f"{local.name} {label}" if label else local.name
     done: dict[int, BatchResult] = {}
     pending: dict[int, object] = {}
@@ -357,6 +366,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     batch_seconds: list[float] = []
     batch_rays: list[int] = []
     first = (0.0, 0)  # (seconds, rays) when the first batch was merged
+    shown = -math.inf  # when the last preview was shown
     partial = False
     start = time.perf_counter() if started is None else started
     setup = time.perf_counter() - start  # the pilot, the workers' start-up
@@ -412,6 +422,9 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
                 el = time.perf_counter() - start
                 eff = found / paths if paths else 0.0
                 progress(budget.fraction(rays, el), f"{method}: {rays:,} rays, efficiency {eff:.2e}, {el:.1f} s")
+        if preview is not None and merged > 0 and not met() and time.perf_counter() - shown >= PREVIEW_SECONDS:
+            preview(film)
+            shown = time.perf_counter()
         if rays == 0 and merged > 0:
             break  # nothing to trace (no source, no geometry): more batches cannot help
     seconds = time.perf_counter() - start
