@@ -1,0 +1,80 @@
+"""The Blender extension's manifest against the wheels it lists (issue 11, Build item 6), from the wheels'
+file names alone (no network, no bpy): every wheel installs on Blender 4.2-4.5's Python 3.11, and each
+platform the manifest claims gets exactly one embreex wheel that runs there, with what that needs beyond
+Blender itself (macOS 13 for embreex 4.4's macOS wheels) stated in the manifest and the README."""
+
+import tomllib
+
+import pytest
+from conftest import ROOT
+from wheel_tags import fits, macos_minimum, project, python_tags, wheel_tags
+
+MANIFEST_TEXT = (ROOT / "blender_manifest.toml").read_text()
+MANIFEST = tomllib.loads(MANIFEST_TEXT)
+MACOS = macos_minimum(MANIFEST_TEXT)
+
+
+def test_the_manifest_claims_blender_4_2_to_4_5():
+    """The wheels' Python (cp311) is Blender 4.2-4.5's; Blender 5 runs Python 3.13."""
+    assert (MANIFEST["blender_version_min"], MANIFEST["blender_version_max"]) == ("4.2.0", "5.0.0")
+
+
+@pytest.mark.parametrize("wheel", MANIFEST["wheels"])
+def test_every_wheel_installs_on_python_3_11(wheel):
+    python_3_11 = {(t.interpreter, t.abi) for t in python_tags(["any"])}  # cp311-cp311, cp3x-abi3, py3-none...
+    assert {(t.interpreter, t.abi) for t in wheel_tags(wheel)} & python_3_11, (
+        f"blender_manifest.toml: wheels: {wheel} is not for CPython 3.11 (Blender 4.2-4.5): "
+        f"{sorted(map(str, wheel_tags(wheel)))}")
+    if project(wheel) == "embreex":  # compiled: built for CPython 3.11's own ABI
+        assert {(t.interpreter, t.abi) for t in wheel_tags(wheel)} == {("cp311", "cp311")}, (
+            f"blender_manifest.toml: wheels: {wheel} is not a cp311-cp311 wheel")
+
+
+@pytest.mark.parametrize("platform", MANIFEST["platforms"])
+def test_each_platform_has_exactly_one_embreex_wheel_that_fits_it(platform):
+    found = [w for w in MANIFEST["wheels"] if project(w) == "embreex" and fits(platform, w, MACOS)]
+    assert len(found) == 1, (f"blender_manifest.toml: wheels: {len(found)} embreex wheels for the platform "
+                             f"{platform!r} (glibc 2.28, macOS {MACOS[0]}): {found}")
+    pure = [w for w in MANIFEST["wheels"] if project(w) != "embreex"]
+    assert pure and all(fits(platform, w, MACOS) for w in pure), (
+        f"blender_manifest.toml: wheels: not every other wheel fits {platform!r}: {pure}")
+
+
+def test_no_wheel_is_for_a_platform_the_manifest_does_not_claim():
+    stray = [w for w in MANIFEST["wheels"] if not any(fits(p, w, MACOS) for p in MANIFEST["platforms"])]
+    assert stray == [], f"blender_manifest.toml: wheels: fit none of {MANIFEST['platforms']}: {stray}"
+
+
+def test_the_stated_macos_minimum_is_what_the_macos_wheels_need():
+    """"macOS 13 or newer" in the manifest's comment and in the README is exactly the embreex wheels' macOS
+    tag: they do not fit macOS 12 (which Blender 4.2-4.5 support), so the statement is needed, and no
+    lower version would do."""
+    older = (MACOS[0] - 1, 0)
+    for platform in ("macos-arm64", "macos-x64"):
+        if platform not in MANIFEST["platforms"]:
+            continue
+        found = [w for w in MANIFEST["wheels"] if project(w) == "embreex" and fits(platform, w, MACOS)]
+        assert len(found) == 1, f"blender_manifest.toml: wheels: embreex wheels for {platform!r}: {found}"
+        assert not fits(platform, found[0], older), (
+            f"blender_manifest.toml: {found[0]} runs on macOS {older[0]}: the comment on \"platforms\" "
+            f"says macOS {MACOS[0]} or newer")
+    readme = (ROOT / "README.md").read_text()
+    assert f"macOS {MACOS[0]} or newer" in readme, f"README.md: does not say \"macOS {MACOS[0]} or newer\""
+
+
+def test_the_tag_rules_reject_what_does_not_run():
+    """The rules above tell wheels apart: another Python, a newer glibc or macOS, another architecture."""
+    assert fits("linux-x64", "e-1-cp311-cp311-manylinux_2_28_x86_64.whl", MACOS)
+    assert fits("linux-x64", "e-1-cp311-cp311-manylinux2014_x86_64.whl", MACOS)
+    assert not fits("linux-x64", "e-1-cp311-cp311-manylinux_2_34_x86_64.whl", MACOS)
+    assert not fits("linux-x64", "e-1-cp311-cp311-manylinux_2_28_aarch64.whl", MACOS)
+    assert not fits("linux-x64", "e-1-cp313-cp313-manylinux_2_28_x86_64.whl", MACOS)
+    assert not fits("linux-x64", "e-1-cp311-cp311-linux_x86_64.whl", MACOS)
+    assert fits("windows-x64", "e-1-cp311-cp311-win_amd64.whl", MACOS)
+    assert not fits("windows-x64", "e-1-cp311-cp311-win32.whl", MACOS)
+    assert fits("macos-arm64", "e-1-cp311-cp311-macosx_11_0_arm64.whl", (11, 0))
+    assert fits("macos-arm64", "e-1-cp311-cp311-macosx_10_9_universal2.whl", (11, 0))
+    assert not fits("macos-arm64", "e-1-cp311-cp311-macosx_13_0_arm64.whl", (12, 0))
+    assert not fits("macos-x64", "e-1-cp311-cp311-macosx_13_0_arm64.whl", (13, 0))
+    assert fits("macos-x64", "t-1-py3-none-any.whl", (11, 0))
+    assert fits("windows-x64", "e-1-cp38-abi3-win_amd64.whl", MACOS)
