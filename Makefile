@@ -26,15 +26,15 @@ test: $(STAMP)
 clean:
 	rm -rf $(VENV) out
 
-# The Blender extension: dist/hud_tracer-<version>.zip, built and validated with Blender's own tool.
+# The Blender extension: one zip per platform, dist/hud_tracer-<version>-<platform>.zip, built with Blender's
+# own tool (blender_ext.py build --split-platforms --source-dir . --output-dir dist) after tools/fetch_wheels.py,
+# each zip validated (blender_ext.py validate) and its size printed: tools/build_extension.py, which the add-on
+# tests build through too.
 BLENDER_EXT = $(VENV)/lib/python3.11/site-packages/bpy/4.5/scripts/addons_core/bl_pkg/cli/blender_ext.py
 
 .PHONY: extension
 extension: $(STAMP)
-	$(PY) tools/fetch_wheels.py
-	mkdir -p dist
-	$(PY) $(BLENDER_EXT) build --source-dir . --output-dir dist
-	$(PY) $(BLENDER_EXT) validate dist/hud_tracer-0.1.0.zip
+	$(PY) tools/build_extension.py --blender-ext $(BLENDER_EXT) --output-dir dist
 
 # Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 50 minutes on 2 cores: references,
 # 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs, the eyebox scan

@@ -15,8 +15,9 @@ from conftest import ROOT, render, z_bound
 _BPY = importlib.util.find_spec("bpy")
 if _BPY is None:
     pytest.skip("the bpy 4.5 module is needed for the add-on tests", allow_module_level=True)
-#: Blender's own extension tool, shipped inside the bpy package (found without importing bpy here).
-BLENDER_EXT = Path(_BPY.origin).parent / "4.5/scripts/addons_core/bl_pkg/cli/blender_ext.py"
+#: Blender's own extension tool, shipped inside the bpy package (bpy/<4.x>/scripts/..., found without importing
+#: bpy here): the tool of the bpy under test, 4.5 or the oldest the manifest allows (`make test-bpy-oldest`).
+(BLENDER_EXT,) = Path(_BPY.origin).parent.glob("[0-9]*/scripts/addons_core/bl_pkg/cli/blender_ext.py")
 
 
 def scenario(*args, timeout=600):
@@ -37,18 +38,33 @@ def read_multilayer(path):
     return {name: px[:, :, i] for i, name in enumerate(spec.channelnames)}
 
 
+def _manifest() -> dict:
+    import tomllib
+
+    return tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+
+
+def _this_platform() -> str:
+    """This machine as Blender names platforms in the manifest (linux-x64, windows-x64, macos-arm64, ...)."""
+    import platform
+
+    system = {"darwin": "macos", "win32": "windows"}.get(sys.platform, sys.platform)
+    machine = {"x86_64": "x64", "amd64": "x64", "aarch64": "arm64"}.get(platform.machine().lower(),
+                                                                        platform.machine().lower())
+    return f"{system}-{machine}"
+
+
 @pytest.fixture(scope="session")
 def extension_zip(tmp_path_factory):
-    """Build the extension zip with Blender's own tool (wheels fetched from PyPI) and validate it."""
+    """Build the extension as `make extension` does (tools/build_extension.py: the pinned wheels fetched from
+    PyPI, Blender's own tool with --split-platforms, every zip validated); the zip for this machine."""
     out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, str(ROOT / "tools" / "fetch_wheels.py")], check=True, cwd=ROOT)
-    subprocess.run([sys.executable, str(BLENDER_EXT), "build", "--source-dir", str(ROOT), "--output-dir", str(out)],
-                   check=True, capture_output=True)
-    zip_path = out / "hud_tracer-0.1.0.zip"
-    check = subprocess.run([sys.executable, str(BLENDER_EXT), "validate", str(zip_path)],
-                           capture_output=True, text=True)
-    assert check.returncode == 0, check.stdout + check.stderr
-    return zip_path
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "build_extension.py"),
+                           "--blender-ext", str(BLENDER_EXT), "--output-dir", str(out)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    m = _manifest()
+    return out / f"{m['id']}-{m['version']}-{_this_platform().replace('-', '_')}.zip"
 
 
 @pytest.mark.parametrize("method,rays", [("backward", 1_500_000), ("forward", 3_000_000)])
@@ -292,16 +308,45 @@ def test_export_follows_render_visibility(tmp_path):
 
 
 def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
-    """Issue 11, finding 10: the license is in the zip; the benchmarks' lock, the README (whose pictures
-    are not shipped), the Dask driver (dask is not bundled), tests and benchmarks are not."""
+    """Issue 11, finding 10: one zip per platform of the manifest, named by Blender's tool; each holds the
+    license, the manifest (its generated table naming its platform and wheels), tracer/, hud_addon/,
+    presets/, exactly one embreex wheel, the one for its platform, and trimesh; nothing the add-on does
+    not use (tests, benchmarks, docs, README, locks, the Dask driver, Makefile, tools, .ci, .git, caches)."""
+    import tomllib
     import zipfile
 
-    names = zipfile.ZipFile(extension_zip).namelist()
-    assert "LICENSE" in names and "blender_manifest.toml" in names
-    assert "tracer/render.py" in names and "hud_addon/engine.py" in names
-    for unused in ("requirements-bench.lock", "README.md", "tracer/distributed.py"):
-        assert unused not in names, unused
-    assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
+    from wheel_tags import fits, macos_minimum, project
+
+    m = _manifest()
+    macos = macos_minimum((ROOT / "blender_manifest.toml").read_text())
+    names = {p: f"{m['id']}-{m['version']}-{p.replace('-', '_')}.zip" for p in m["platforms"]}
+    dist = extension_zip.parent
+    assert sorted(z.name for z in dist.iterdir()) == sorted(names.values()), "the zips made by the build"
+    # Every file of the add-on's packages, as the build sees them on disk (untracked ones too).
+    shipped = {p.relative_to(ROOT).as_posix() for d in ("tracer", "hud_addon", "presets")
+               for p in (ROOT / d).rglob("*") if p.is_file() and "__pycache__" not in p.parts}
+    shipped -= {"tracer/distributed.py"}
+    for platform, name in names.items():
+        z = zipfile.ZipFile(dist / name)
+        entries = [n for n in z.namelist() if not n.endswith("/")]
+        top = {n.split("/")[0] for n in entries}
+        wanted = {"LICENSE", "blender_manifest.toml", "__init__.py", "tracer", "hud_addon", "presets", "wheels"}
+        assert top == wanted, f"{name}: unused {sorted(top - wanted)}, missing {sorted(wanted - top)}"
+        code = {n for n in entries if n.startswith(("tracer/", "hud_addon/", "presets/"))}
+        assert code == shipped, f"{name}: unused {sorted(code - shipped)}, missing {sorted(shipped - code)}"
+        for unused in ("README.md", "Makefile", "requirements.lock", "requirements-bench.lock", "tracer/distributed.py",
+                       ".git", ".gitignore"):
+            assert unused not in entries, (name, unused)
+        assert not any(n.startswith(("tests/", "benchmarks/", "docs/", "tools/", ".ci/", ".venv")) or n.endswith(".pyc")
+                       for n in entries), name
+        wheels = sorted(n for n in entries if n.startswith("wheels/"))
+        embreex = [w for w in wheels if project(w) == "embreex"]
+        assert len(embreex) == 1 and fits(platform, embreex[0], macos), (name, wheels)
+        assert [project(w) for w in wheels if w not in embreex] == ["trimesh"], (name, wheels)
+        generated = tomllib.loads(z.read("blender_manifest.toml").decode())["build"]["generated"]
+        assert generated["platforms"] == [platform], (name, generated)
+        assert sorted(w.removeprefix("./") for w in generated["wheels"]) == wheels, (name, generated)
+        assert z.read("LICENSE") == (ROOT / "LICENSE").read_bytes(), name
 
 
 def test_every_property_has_a_tooltip():
