@@ -7,6 +7,8 @@ import tomllib
 
 import pytest
 from conftest import ROOT
+from packaging.utils import canonicalize_name
+from packaging.version import Version
 from wheel_tags import fits, macos_minimum, project, python_tags, wheel_tags
 
 MANIFEST_TEXT = (ROOT / "blender_manifest.toml").read_text()
@@ -78,3 +80,27 @@ def test_the_tag_rules_reject_what_does_not_run():
     assert not fits("macos-x64", "e-1-cp311-cp311-macosx_13_0_arm64.whl", (13, 0))
     assert fits("macos-x64", "t-1-py3-none-any.whl", (11, 0))
     assert fits("windows-x64", "e-1-cp38-abi3-win_amd64.whl", MACOS)
+
+
+def _pins(name: str) -> dict[str, str]:
+    pins = {}
+    for n, line in enumerate((ROOT / name).read_text().splitlines(), 1):
+        line = line.split("#")[0].strip()
+        if line:
+            package, sep, version = line.partition("==")
+            assert sep and version, f"{name}, line {n}: not an exact pin: {line!r}"
+            pins[canonicalize_name(package)] = version
+    return pins
+
+
+def test_the_oldest_bpy_lock_is_requirements_lock_with_the_manifests_oldest_bpy():
+    """`make test-bpy-oldest` runs the add-on tests on the bpy of blender_version_min, every other package
+    as requirements.lock pins it."""
+    oldest, main = _pins("requirements-bpy42.lock"), _pins("requirements.lock")
+    minimum = Version(MANIFEST["blender_version_min"]).release[:2]
+    assert Version(oldest.get("bpy", "0")).release[:2] == minimum, (
+        f"requirements-bpy42.lock: bpy {oldest.get('bpy')} is not blender_version_min's {minimum}")
+    differ = {k: (v, main.get(k)) for k, v in oldest.items() if k != "bpy" and main.get(k) != v}
+    assert differ == {}, f"requirements-bpy42.lock: pins that differ from requirements.lock: {differ}"
+    needed = {"numpy", "embreex", "trimesh", "openimageio", "pytest", "setuptools"}
+    assert needed <= oldest.keys(), f"requirements-bpy42.lock: missing {sorted(needed - oldest.keys())}"
