@@ -1,4 +1,4 @@
-"""Command line: ``hud-trace render | presets | export | methods``.
+"""Command line: ``hud-trace render | presets | export | methods | false-colour``.
 
 Exit status of ``render`` (each states what is on disk afterwards):
 
@@ -11,6 +11,9 @@ Exit status of ``render`` (each states what is on disk afterwards):
 - 5: aborted by a second interrupt; nothing written, the output folder keeps its earlier outputs.
 - 130: interrupted (Ctrl-C, SIGTERM or SIGHUP): the batches merged so far are written as a set,
   marked ``"partial": true``.
+
+``false-colour`` writes the false-colour view of an image.exr (tracer.falsecolour) to one PNG file:
+0 written, 2 bad input (nothing written), 4 the file could not be written (it keeps what it held).
 """
 
 from __future__ import annotations
@@ -226,6 +229,46 @@ def cmd_methods(args) -> int:
     return 0
 
 
+def check_false_colour_args(args):
+    """--min and --max finite and positive, --min below --max, --out a .png file."""
+    for flag, v in (("--min", args.min), ("--max", args.max)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ArgumentError(f"{flag}: must be a finite luminance > 0 cd/m^2, got {v}")
+    if args.min is not None and args.max is not None and args.min >= args.max:
+        raise ArgumentError(f"--min: {args.min:g} cd/m^2 must be below --max {args.max:g} cd/m^2")
+    if Path(args.out).suffix.lower() != ".png":
+        raise ArgumentError(f"--out: must name a .png file, got {args.out}")
+
+
+def cmd_false_colour(args) -> int:
+    from .errors import ImageReadError
+    from .falsecolour import luminance_range, read_luminance, save_false_colour
+    from .outputs import OutputFolderError, OutputWriteError
+
+    try:
+        check_false_colour_args(args)
+        y = read_luminance(args.image)
+        # One bound given: it must fit the default of the other.
+        lo, hi, _ = luminance_range(y)
+        if args.min is not None and args.max is None and args.min >= hi:
+            raise ArgumentError(f"--min: {args.min:g} cd/m^2 is not below the top of the default range, {hi:g} "
+                                "cd/m^2; give --max too")
+        if args.max is not None and args.min is None and args.max <= lo:
+            raise ArgumentError(f"--max: {args.max:g} cd/m^2 is not above the bottom of the default range, {lo:g} "
+                                "cd/m^2; give --min too")
+        info = save_false_colour(args.out, y, args.min, args.max)
+    except (ArgumentError, ImageReadError, OutputFolderError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except OutputWriteError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_WRITE
+    clamped = "".join(f"; {100 * info[k]:.3g} % of the pixels {k} the range" for k in ("below", "above") if info[k])
+    print(f"false colour: {info['lo']:g} to {info['hi']:g} cd/m^2 ({info['decades']:g} decades, {info['colour_map']})"
+          f"{clamped} -> {args.out}", file=sys.stderr)
+    return 0
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
 
@@ -268,6 +311,16 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_export)
     m = sub.add_parser("methods", help="list the light-transport methods")
     m.set_defaults(func=cmd_methods)
+    f = sub.add_parser("false-colour", help="write the false-colour luminance view of an image.exr")
+    f.add_argument("image", help="an image.exr written by `hud-trace render` (its Y channel, or R, G, B)")
+    f.add_argument("--out", required=True, help="the PNG file to write")
+    f.add_argument("--min", type=float, default=None, metavar="CD_M2",
+                   help="bottom of the scale, cd/m^2 (default: the decade at or below the 1st percentile of the lit "
+                        "pixels)")
+    f.add_argument("--max", type=float, default=None, metavar="CD_M2",
+                   help="top of the scale, cd/m^2 (default: the decade at or above the maximum; at most 8 decades "
+                        "in all)")
+    f.set_defaults(func=cmd_false_colour)
     return ap
 
 
