@@ -1,4 +1,4 @@
-"""Command line: ``hud-trace render | presets | export | methods | false-colour``.
+"""Command line: ``hud-trace render | presets | export | methods | false-colour | eyebox``.
 
 Exit status of ``render`` (each states what is on disk afterwards):
 
@@ -14,6 +14,11 @@ Exit status of ``render`` (each states what is on disk afterwards):
 
 ``false-colour`` writes the false-colour view of an image.exr (tracer.falsecolour) to one PNG file:
 0 written, 2 bad input (nothing written), 4 the file could not be written (it keeps what it held).
+
+``eyebox`` writes eyebox.csv, eyebox.png and eyebox.json (tracer.eyebox) into a folder as one set: 0
+written; 2 bad input, before the scan (nothing written); 3 written, but the analysis cannot predict
+the scene (eyebox.json's ``valid`` is false and stderr says why); 4 the outputs could not be written
+(the folder keeps its earlier ones); 5 aborted by Ctrl-C (nothing written).
 """
 
 from __future__ import annotations
@@ -269,6 +274,69 @@ def cmd_false_colour(args) -> int:
     return 0
 
 
+#: The eyebox scan's arguments and the command line's flags for them.
+EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field", "threshold": "--threshold"}
+
+
+def cmd_eyebox(args) -> int:
+    from .allocator import keep_freed_memory
+    from .eyebox import OUTPUT_NAMES, FieldNotFound, ScanArgumentError, check_scan, eyebox_scan, output_files
+    from .outputs import OutputFolderError, OutputSet, OutputWriteError
+    from .scene import load_scene
+    from .world import World
+
+    try:
+        check_scan(args.half, args.step, args.field, args.threshold)
+    except ScanArgumentError as e:
+        print(f"error: {EYEBOX_FLAGS[e.argument]}: {e.message}", file=sys.stderr)
+        return EXIT_INPUT
+    keep_freed_memory()
+    bar = None if args.quiet else ProgressBar()
+    try:
+        with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
+            scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
+            outputs = OutputSet(args.out, OUTPUT_NAMES).open()  # checked and locked before the first ray
+            try:
+                result = eyebox_scan(World(scene), args.half, args.step, args.field, args.threshold, progress=bar)
+                outputs.commit(output_files(result))
+                outputs.keep()
+            finally:
+                outputs.close()
+    except FieldNotFound as e:
+        print(f"error: --field: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except (OutputFolderError, EstimateOverflowError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except OutputWriteError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_WRITE
+    except KeyboardInterrupt:
+        print(f"aborted: nothing written; {args.out} keeps what it held", file=sys.stderr)
+        return EXIT_ABORTED
+    except OSError as e:  # I/O outside the output set (a preset's temporary scene folder on a full disk)
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_WRITE
+    finally:
+        if bar:
+            bar.close()
+    d = result.design_cd_m2
+    corners = ", ".join(f"{v:.4g}" for v in d[1:])
+    print(f"eyebox of {result.scene}: design eye {d[0]:.4g} cd/m^2 at the centre, {corners} toward the corners -> "
+          f"{args.out}", file=sys.stderr)
+    if not result.valid:
+        for reason in result.reasons:
+            print(f"warning: not valid: {reason}", file=sys.stderr)
+        return EXIT_NO_LIGHT
+    f = result.figures()
+    print(f"eyebox {f['width_mm']:.1f} x {f['height_mm']:.1f} mm (every field point >= {100 * args.threshold:g} % of "
+          f"design); uniformity {f['uniformity']['design_eye']:.3f} at the design eye, {f['uniformity']['eyebox']:.3f} "
+          "over the eyebox", file=sys.stderr)
+    if f["reaches_scan_edge"]:
+        print("warning: the eyebox reaches the edge of the scan: widen --half to see all of it", file=sys.stderr)
+    return 0
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
 
@@ -321,6 +389,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="top of the scale, cd/m^2 (default: the decade at or above the maximum; at most 8 decades "
                         "in all)")
     f.set_defaults(func=cmd_false_colour)
+    y = sub.add_parser("eyebox", help="scan the eyebox with the brightness-theorem analysis")
+    y.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
+    y.add_argument("--out", required=True, help="output folder (eyebox.csv, eyebox.png, eyebox.json)")
+    y.add_argument("--half", type=float, nargs=2, default=(60.0, 30.0), metavar=("W", "H"),
+                   help="half-widths of the grid of eye offsets, right and up, mm (default 60 30)")
+    y.add_argument("--step", type=float, default=5.0, metavar="S", help="grid step, mm (default 5)")
+    y.add_argument("--field", type=float, nargs=2, default=None, metavar=("FX", "FY"),
+                   help="display field, full width and height, deg, centred on the gaze (default: found from the "
+                        "scene, where the eye sees an LCD through the optics)")
+    y.add_argument("--threshold", type=float, default=0.5, metavar="T",
+                   help="share of its design-eye luminance every field point keeps inside the eyebox (default 0.5)")
+    y.add_argument("--quiet", action="store_true", help="no progress bar")
+    y.add_argument("--allow-external-files", action="store_true",
+                   help="let the scene name meshes and images outside its folder")
+    y.set_defaults(func=cmd_eyebox)
     return ap
 
 
