@@ -139,6 +139,8 @@ def test_the_default_range_runs_from_decade_to_decade_at_most_eight():
     lo, hi, how = luminance_range(wide)
     assert (lo, hi) == (pytest.approx(1e-2), 1e6) and "8 decades" in how
     assert luminance_range(np.full((4, 4), 100.0))[:2] == (10.0, 100.0)
+    lo, hi, how = luminance_range(np.zeros((4, 4)))
+    assert (lo, hi) == (1.0, 10.0) and "no pixel is lit" in how
     with pytest.raises(ValueError, match="lo"):
         luminance_range(y, lo=1e5)
     with pytest.raises(ValueError, match="hi"):

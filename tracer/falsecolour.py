@@ -138,12 +138,27 @@ FONT = _glyphs()
 
 
 # -- colour map ---------------------------------------------------------------------------------------
-def colour_map(t) -> np.ndarray:
-    """Viridis at positions ``t`` (any shape, clamped to [0, 1]): (..., 3) uint8, sRGB-encoded."""
-    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
+#: Entries of colour_map's lookup table: the map interpolated at t = i / 65535, which holds every
+#: control point exactly (their t = k / 255, and 65535 = 255 x 257) and is within 0.002 of a level
+#: of the interpolation everywhere; one gather instead of three interpolations per pixel.
+_LUT_SIZE = 65536
+
+
+def _lookup_table() -> np.ndarray:
+    t = np.arange(_LUT_SIZE) / (_LUT_SIZE - 1)
     x = VIRIDIS[:, 0] / 255.0
     rgb = np.stack([np.interp(t, x, VIRIDIS[:, c]) for c in (1, 2, 3)], axis=-1)
     return np.rint(rgb * 255.0).astype(np.uint8)
+
+
+_LUT = _lookup_table()
+
+
+def colour_map(t) -> np.ndarray:
+    """Viridis, interpolated linearly between :data:`VIRIDIS`'s control points, at positions ``t``
+    (any shape, finite, clamped to [0, 1]): (..., 3) uint8, sRGB-encoded."""
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
+    return _LUT[np.rint(t * (_LUT_SIZE - 1)).astype(np.intp)]
 
 
 # -- text ---------------------------------------------------------------------------------------------
