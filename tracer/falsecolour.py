@@ -3,8 +3,8 @@ with a legend, as an 8-bit sRGB image. Everything here is numpy: no PIL, no matp
 also runs inside Blender, which has neither).
 
 - Scale: t = (log10 Y - log10 lo) / (log10 hi - log10 lo), clamped to [0, 1], through the viridis
-  colour map (:data:`VIRIDIS`), whose luminance increases monotonically along it, so brighter
-  always reads brighter. The default range runs from the decade at or below the 1st percentile of
+  colour map (:data:`VIRIDIS`), whose luminance increases monotonically along it (to within the
+  8-bit rounding of one channel), so brighter always reads brighter. The default range runs from the decade at or below the 1st percentile of
   the lit pixels (Y > 0) to the decade at or above the maximum, at most :data:`MAX_DECADES`
   decades (the top ones are kept: a HUD's symbols and its black leak, not the faint stray light
   below them). Pixels at or below 0 cd/m^2 (no light) are black, which the colour map never
@@ -129,7 +129,8 @@ def _glyphs() -> dict[str, np.ndarray]:
         r = rows.split()
         r += ["....."] * (GLYPH_H + GLYPH_DESCENT - len(r))
         out[ch] = np.array([[c == "#" for c in row] for row in r], bool)
-        assert out[ch].shape == (GLYPH_H + GLYPH_DESCENT, GLYPH_W), ch
+        if out[ch].shape != (GLYPH_H + GLYPH_DESCENT, GLYPH_W):
+            raise ValueError(f"glyph {ch!r} of the bitmap font is not {GLYPH_W} x {GLYPH_H + GLYPH_DESCENT}")
     return out
 
 
