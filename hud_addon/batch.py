@@ -6,8 +6,9 @@ The add-on is enabled from this source tree through a temporary local extension 
 disables it at exit, so the bpy module does not hang), the file is opened, its HUD settings are
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
 DIR receives image.exr (multilayer: Combined, the luminance pass Y and its standard error Y_noise,
-cd/m^2, with the hud:* header fields of the command line's image.exr) and report.json (the command
-line's report, tracer.render.build_report, with the .blend's path), written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
+cd/m^2, with the hud:* header fields of the command line's image.exr), report.json (the command
+line's report, tracer.render.build_report, with the .blend's path) and falsecolour.png (Y in false
+colour, logarithmic, with a legend in cd/m^2: tracer.falsecolour), written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
 the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
 kept). The report's ``run_id`` names the set. This module imports nothing from the package at import
@@ -30,6 +31,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTENSION_ID = "hud_tracer"
+#: The files of a hud-render, written as a set.
+OUTPUT_NAMES = ("image.exr", "report.json", "falsecolour.png")
 
 
 def enable_from_source(bpy, tmp: Path) -> str:
@@ -71,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_render_args(argparse.Namespace(rays=args.rays, seconds=args.seconds, seed=args.seed or 0,
                                              batch_size=None, workers=1))
-        outputs = OutputSet(Path(args.out).resolve(), ("image.exr", "report.json")).open()
+        outputs = OutputSet(Path(args.out).resolve(), OUTPUT_NAMES).open()
     except (ArgumentError, OutputFolderError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -86,6 +89,7 @@ def _render(args, blend: Path, outputs) -> int:
     image and the report to ``outputs`` (a locked :class:`tracer.outputs.OutputSet`)."""
     import numpy as np
 
+    from tracer.falsecolour import png_file
     from tracer.imageio import read_exr_channels
     from tracer.outputs import OutputFile, OutputWriteError
     from tracer.render import finite_json
@@ -140,10 +144,12 @@ def _render(args, blend: Path, outputs) -> int:
         if attrs.get("hud:run_id") != figures["run_id"]:
             raise ValueError("the image's hud:run_id differs from the report's")
 
+    colour = engine.FALSE_COLOUR[scene.name][0]
     try:
         outputs.commit([OutputFile("image.exr", lambda path: shutil.copyfile(rendered, path), check_exr),
                         OutputFile("report.json", lambda path: path.write_text(text), lambda path: json.loads(
-                            path.read_text()))])
+                            path.read_text())),
+                        png_file("falsecolour.png", colour)])
     except OutputWriteError as e:
         print(f"error: {e}", file=sys.stderr)
         return 4

@@ -15,9 +15,13 @@ from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import LEGACY_EMITTER, load_scene
 from . import schema_ui
-from .export import M_TO_MM
+from .units import unit_mm
 
 COLLECTION = "HUD"
+#: Custom property on the collections (and objects) "Add HUD Preset" builds: the preset's name.
+TAG = "hud_preset"
+#: Viewport and camera clipping of a scene built in millimetres (Blender units = mm).
+CLIP_MM = (0.1, 1.0e5)
 
 
 def _apply_aim(h, prefix: str, aim: dict | None, by_name: dict):
@@ -50,13 +54,67 @@ def _apply_object(obj, spec: dict, by_name: dict, root: Path):
         _apply_aim(h, "emission_", emission.get("aim"), by_name)
 
 
-def build_scene(folder, context) -> list:
+def _is_factory_cube(obj) -> bool:
+    """The cube of Blender's startup file: "Cube", 8 vertices at +-1, at the origin, unscaled, no role."""
+    if obj.name != "Cube" or obj.type != "MESH" or obj.hud.role != "none" or len(obj.data.vertices) != 8:
+        return False
+    co = np.array([v.co[:] for v in obj.data.vertices])
+    return (np.allclose(np.abs(co), 1.0) and np.allclose(obj.matrix_world, np.eye(4)))
+
+
+def _remove_collection(coll):
+    """Remove a collection, its objects and the meshes and cameras only they used."""
+    for obj in list(coll.all_objects):
+        data = obj.data
+        bpy.data.objects.remove(obj)
+        if isinstance(data, bpy.types.Mesh) and data.users == 0:
+            bpy.data.meshes.remove(data)
+        elif isinstance(data, bpy.types.Camera) and data.users == 0:
+            bpy.data.cameras.remove(data)
+    bpy.data.collections.remove(coll)
+
+
+def clear_previous(scene) -> list[str]:
+    """Remove the collections an earlier "Add HUD Preset" built in ``scene`` (and their objects) and
+    Blender's startup cube; returns the names of the collections removed."""
+    removed = []
+    for coll in [c for c in scene.collection.children_recursive if TAG in c]:
+        removed.append(coll.name)
+        _remove_collection(coll)
+    for obj in [o for o in scene.objects if _is_factory_cube(o)]:
+        mesh = obj.data
+        bpy.data.objects.remove(obj)
+        if mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+    return removed
+
+
+def _use_millimetres(scene, context):
+    """Blender units = millimetres (Scene > Units), with clipping for scenes a few metres deep."""
+    u = scene.unit_settings
+    u.system, u.scale_length, u.length_unit = "METRIC", 0.001, "MILLIMETERS"
+    screen = getattr(context, "screen", None)
+    for area in (screen.areas if screen is not None else []):
+        for space in area.spaces:
+            if space.type == "VIEW_3D":
+                space.clip_start, space.clip_end = CLIP_MM
+
+
+def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]:
     """Create the objects, the eye camera and the world settings of a scene folder in the current
-    scene (lengths mm -> Blender units). Returns the new objects."""
+    scene, in a new collection "HUD <name>" (issue 11, finding 9). With ``replace``, what an earlier
+    preset built and Blender's startup cube go first. A scene that holds nothing else is set to
+    millimetres (1 Blender unit = 1 mm); otherwise the preset is built in the scene's own units.
+    Returns the new objects and the names of the collections replaced."""
     scene = context.scene
     sc = load_scene(folder)
-    unit = M_TO_MM * scene.unit_settings.scale_length  # mm per Blender unit
+    removed = clear_previous(scene) if replace else []
+    others = [o for o in scene.objects if o.type not in ("LIGHT", "CAMERA")]
+    if not others:
+        _use_millimetres(scene, context)
+    unit = unit_mm(scene)  # mm per Blender unit
     coll = bpy.data.collections.new(f"{COLLECTION} {sc.name}")
+    coll[TAG] = sc.name
     scene.collection.children.link(coll)
     created, by_name = [], {}
     for o in sc.objects:
@@ -71,6 +129,7 @@ def build_scene(folder, context) -> list:
             layer.data.foreach_set("uv", o.uv[loop_vertex].astype(np.float32).ravel())
         mesh.update()
         obj = bpy.data.objects.new(o.name, mesh)
+        obj[TAG] = sc.name
         obj.location = center / unit
         obj.hud.smooth_normals = o.smooth
         if o.smooth:
@@ -86,7 +145,7 @@ def build_scene(folder, context) -> list:
         schema_ui.apply(scene.hud, INTEGRATORS[name].options, block, f"{name}_", (), Path(sc.root), by_name)
     _build_eye(sc.eye, scene, coll, unit)
     _build_world(sc, scene)
-    return created
+    return created, removed
 
 
 def _build_eye(eye, scene, coll, unit):
@@ -94,12 +153,13 @@ def _build_eye(eye, scene, coll, unit):
     cam_data.sensor_fit = "HORIZONTAL"
     cam_data.sensor_width = 36.0
     cam_data.lens = 18.0 / math.tan(math.radians(eye.fov_deg[0]) / 2)
-    cam_data.clip_start = 0.001
+    cam_data.clip_start, cam_data.clip_end = CLIP_MM[0] / unit, CLIP_MM[1] / unit
     cam_data.hud.pupil_diameter_mm = eye.pupil_diameter_mm
     cam_data.hud.focal_length_mm = eye.focal_length_mm
     acc = eye.accommodation_distance_mm
     cam_data.hud.accommodation_distance_mm = 0.0 if math.isinf(acc) else acc
     cam = bpy.data.objects.new("Eye", cam_data)
+    cam[TAG] = coll[TAG]
     right = np.cross(eye.gaze, eye.up)
     right /= np.linalg.norm(right)
     up = np.cross(right, eye.gaze)

@@ -9,11 +9,15 @@ ray batches). The Render Result gets Combined (apparent luminance, cd/m^2, linea
 (cd/m^2) and Y_noise (the standard error of Y, cd/m^2), and the same hud:* fields as the command
 line's image.exr as stamp data (written into the EXR Blender saves). The command line's report
 (tracer.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
-hud-render's report.json and the HUD Readouts panel.
+hud-render's report.json and the HUD Readouts panel, with the false-colour view of Y
+(tracer.falsecolour) in :data:`FALSE_COLOUR`. When Blender writes the render to a file (F12 with
+write_still, an animation, ``blender -b -a``), the false-colour view and the report are written beside
+it: ``<file>.falsecolour.png`` and ``<file>.report.json`` (:func:`write_beside`).
 """
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from pathlib import Path
@@ -22,8 +26,9 @@ import bpy
 import numpy as np
 
 from ..tracer.errors import SceneError, TracerError
+from ..tracer.falsecolour import false_colour, png_file, write_as_set
 from ..tracer.integrators import INTEGRATORS, Budget
-from ..tracer.render import render_products, run_render
+from ..tracer.render import finite_json, render_products, run_render
 from ..tracer.scene import load_scene
 from ..tracer.units import Y_WEIGHTS
 from ..tracer.world import World
@@ -41,6 +46,8 @@ UNITS = ("Combined (R,G,B), Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7
 LAST_RENDER: dict = {}
 #: The last report of each scene by name: what the HUD Readouts panel shows.
 REPORTS: dict[str, dict] = {}
+#: The false-colour view of each scene's last render: (sRGB uint8 (H', W', 3), its info).
+FALSE_COLOUR: dict[str, tuple] = {}
 
 
 def worker_count(scene) -> int:
@@ -119,7 +126,40 @@ def render_final(engine, depsgraph) -> dict:
     LAST_RENDER.clear()
     LAST_RENDER.update(report)
     REPORTS[scene.name] = report
+    FALSE_COLOUR[scene.name] = false_colour(products.y)
     return dict(report)
+
+
+def beside(path: Path) -> tuple[Path, Path]:
+    """The false-colour view's and the report's paths beside a rendered file."""
+    return path.with_name(path.name + ".falsecolour.png"), path.with_name(path.name + ".report.json")
+
+
+def written_file(scene) -> Path | None:
+    """The file Blender has just written for ``scene``'s frame: an animation's frame path (with the
+    frame number), or a still's (without it), whichever exists and is the newer."""
+    r = scene.render
+    still = bpy.path.abspath(r.filepath) + (r.file_extension if r.use_file_extension else "")
+    frame = bpy.path.abspath(r.frame_path(frame=scene.frame_current))
+    found = [p for p in {Path(still), Path(frame)} if p.is_file()]
+    return max(found, key=lambda p: p.stat().st_mtime_ns) if found else None
+
+
+@bpy.app.handlers.persistent  # kept when a file is opened (hud-render opens one after enabling us)
+def write_beside(scene, *_):
+    """render_write handler: beside the file Blender has just written for ``scene``'s frame, the
+    false-colour view and the report of that render (each written as a set: tracer.outputs)."""
+    report = REPORTS.get(scene.name)
+    if report is None or report.get("blender", {}).get("frame") != scene.frame_current:
+        return
+    written = written_file(scene)
+    if written is None:
+        return
+    colour_path, report_path = beside(written)
+    f = png_file(colour_path.name, FALSE_COLOUR[scene.name][0])
+    write_as_set(colour_path, f.write, f.check)
+    text = finite_json(report | {"image_file": str(written)})
+    write_as_set(report_path, lambda p: Path(p).write_text(text), lambda p: finite_json(json.loads(Path(p).read_text())))
 
 
 class HudRenderEngine(bpy.types.RenderEngine):
@@ -140,4 +180,15 @@ class HudRenderEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
 
-register, unregister = bpy.utils.register_classes_factory((HudRenderEngine,))
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory((HudRenderEngine,))
+
+
+def register():
+    _register_classes()
+    bpy.app.handlers.render_write.append(write_beside)
+
+
+def unregister():
+    if write_beside in bpy.app.handlers.render_write:
+        bpy.app.handlers.render_write.remove(write_beside)
+    _unregister_classes()

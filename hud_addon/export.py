@@ -33,9 +33,8 @@ from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.outputs import replace_folder
 from . import schema_ui
+from .units import unit_mm
 
-#: Metres to millimetres.
-M_TO_MM = 1000.0
 #: What an export folder holds; a folder holding anything else is not replaced (see _check_replaceable).
 EXPORT_ENTRIES = frozenset({"scene.json", "meshes", "textures"})
 #: Files the file manager of an OS puts into any folder it shows: replaced along with an export.
@@ -43,11 +42,6 @@ _OS_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
 #: File names Windows refuses whatever their extension.
 _WINDOWS_RESERVED = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
                                *(f"LPT{i}" for i in range(1, 10))})
-
-
-def _unit_mm(scene) -> float:
-    """Millimetres per Blender unit."""
-    return M_TO_MM * scene.unit_settings.scale_length
 
 
 class _FileNames:
@@ -171,15 +165,15 @@ def _mesh_arrays(evaluated, with_uv: bool):
         evaluated.to_mesh_clear()
 
 
-def _mesh_writer(co: np.ndarray, tri: np.ndarray, uv, unit_mm: float) -> Callable[[Path], None]:
+def _mesh_writer(co: np.ndarray, tri: np.ndarray, uv, mm: float) -> Callable[[Path], None]:
     """write(path) of a mesh's arrays as OBJ in millimetres."""
-    return lambda path: write_obj(path, co * unit_mm, tri, uv)
+    return lambda path: write_obj(path, co * mm, tri, uv)
 
 
-def _matrix_mm(matrix, unit_mm: float) -> list[list[float]]:
+def _matrix_mm(matrix, mm: float) -> list[list[float]]:
     """A world matrix (Blender units) with its translation in millimetres."""
     m = np.array(matrix, dtype=np.float64)
-    m[:3, 3] *= unit_mm
+    m[:3, 3] *= mm
     return m.tolist()
 
 
@@ -254,7 +248,7 @@ def eye_spec(scene, depsgraph=None) -> dict:
     hud = cam.original.data.hud
     if depsgraph is not None:
         cam = cam.evaluated_get(depsgraph)
-    unit_mm = _unit_mm(scene)
+    mm = unit_mm(scene)
     r = scene.render
     w = max(1, int(r.resolution_x * r.resolution_percentage / 100))
     h = max(1, int(r.resolution_y * r.resolution_percentage / 100))
@@ -276,7 +270,7 @@ def eye_spec(scene, depsgraph=None) -> dict:
     mw = np.array(cam.matrix_world, dtype=np.float64)
     rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)
     acc = hud.accommodation_distance_mm
-    eye = {"position": (mw[:3, 3] * unit_mm).tolist(), "gaze": (-rot[:, 2]).tolist(), "up": rot[:, 1].tolist(),
+    eye = {"position": (mw[:3, 3] * mm).tolist(), "gaze": (-rot[:, 2]).tolist(), "up": rot[:, 1].tolist(),
            "pupil_diameter_mm": hud.pupil_diameter_mm, "focal_length_mm": hud.focal_length_mm,
            "accommodation_distance_mm": acc if acc > 0 else "infinity",
            "resolution": [w, h], "fov_deg": [math.degrees(2 * fx), math.degrees(2 * fy)]}
@@ -489,7 +483,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     scene = depsgraph.scene
     target = _target_folder(folder)
     _check_replaceable(target)
-    unit_mm = _unit_mm(scene)
+    mm = unit_mm(scene)
     plan = _Plan()
     eye = eye_spec(scene, depsgraph)
     environment = environment_spec(scene, plan)
@@ -501,9 +495,9 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
         obj = item.original
         if item.mesh_key not in mesh_files:
             co, tri, uv = meshes[item.mesh_key]
-            mesh_files[item.mesh_key] = plan.add(f"meshes/{stems[item.name]}.obj", _mesh_writer(co, tri, uv, unit_mm))
+            mesh_files[item.mesh_key] = plan.add(f"meshes/{stems[item.name]}.obj", _mesh_writer(co, tri, uv, mm))
         entry = {"name": item.name, "mesh": mesh_files[item.mesh_key],
-                 "transform": {"matrix": _matrix_mm(item.matrix, unit_mm)},
+                 "transform": {"matrix": _matrix_mm(item.matrix, mm)},
                  "material": material_spec(obj, plan, stems[item.name])}
         if obj.hud.smooth_normals:
             entry["smooth_normals"] = True

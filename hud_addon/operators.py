@@ -1,4 +1,5 @@
-"""Operators: add a preset, export the scene folder, show sampled light paths."""
+"""Operators: add a preset, export the scene folder, show sampled light paths, show the last render's
+false-colour view, sweep the eyebox."""
 
 from __future__ import annotations
 
@@ -7,13 +8,25 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ..presets import PRESETS
+from ..tracer.errors import SceneError, TracerError
+from ..tracer.eyebox import OUTPUT_NAMES as EYEBOX_FILES
+from ..tracer.eyebox import FieldNotFound, ScanArgumentError, eyebox_scan
+from ..tracer.eyebox import output_files as eyebox_files
 from ..tracer.integrators import INTEGRATORS
+from ..tracer.outputs import OutputSet
 from ..tracer.scene import load_scene
+from ..tracer.world import World
+from . import engine
 from .build import build_scene
-from .export import M_TO_MM, export_scene
+from .export import blender_terms, export_scene
+from .units import unit_mm
+
+#: The last eyebox sweep of each scene by name: its summary (tracer.eyebox.EyeboxResult.summary), the
+#: grid of offsets inside the eyebox and the folder it was written to; the HUD Readouts panel shows it.
+EYEBOX: dict[str, dict] = {}
 
 
 def _preset_items(self, context):
@@ -28,13 +41,19 @@ class HUD_OT_add_preset(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     preset: EnumProperty(name="Preset", items=_preset_items)
+    replace: BoolProperty(name="Replace", default=True,
+                          description="Remove what an earlier Add HUD Preset built in this scene (and Blender's "
+                                      "startup cube) first")
 
     def execute(self, context):
         with tempfile.TemporaryDirectory(prefix="hud-preset-") as tmp:
             folder = PRESETS[self.preset].write(Path(tmp) / self.preset)
-            objects = build_scene(folder, context)
+            objects, replaced = build_scene(folder, context, self.replace)
         context.scene.render.engine = "HUD_TRACER"
-        self.report({"INFO"}, f"{self.preset}: {len(objects)} objects")
+        mm = unit_mm(context.scene)
+        units = "1 unit = 1 mm" if abs(mm - 1.0) < 1e-6 else f"1 unit = {mm:g} mm"
+        note = f", replacing {', '.join(replaced)}" if replaced else ""
+        self.report({"INFO"}, f"{self.preset}: {len(objects)} objects in collection HUD {self.preset} ({units}){note}")
         return {"FINISHED"}
 
 
@@ -85,8 +104,7 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
             self.report({"WARNING"}, f"none of {self.particles:,} particles reached the eye pupil")
             return {"CANCELLED"}
         paths = paths[: self.max_paths]
-        unit = M_TO_MM * scene.unit_settings.scale_length
-        verts = np.concatenate(paths) / unit
+        verts = np.concatenate(paths) / unit_mm(scene)
         offsets = np.cumsum([0] + [len(p) for p in paths])
         edges = [(i, i + 1) for a, b in zip(offsets[:-1], offsets[1:], strict=True) for i in range(a, b - 1)]
         mesh = bpy.data.meshes.new("HUD light paths")
@@ -97,6 +115,100 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (HUD_OT_add_preset, HUD_OT_export_scene, HUD_OT_show_light_paths)
+def show_image(context, name: str, rgb: np.ndarray):
+    """Put an sRGB uint8 image (H, W, 3) into the image datablock ``name`` (made or resized) and show it
+    in the first Image Editor of the screen, if there is one. Returns the image."""
+    h, w = rgb.shape[:2]
+    image = bpy.data.images.get(name)
+    if image is None or tuple(image.size) != (w, h):
+        if image is not None:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(name, w, h, alpha=False)
+    rgba = np.concatenate([rgb[::-1].astype(np.float32) / 255.0, np.ones((h, w, 1), np.float32)], axis=2)
+    image.pixels.foreach_set(rgba.ravel())
+    image.update()
+    screen = getattr(context, "screen", None)
+    for area in (screen.areas if screen is not None else []):
+        if area.type == "IMAGE_EDITOR":
+            area.spaces.active.image = image
+            break
+    return image
+
+
+class HUD_OT_show_false_colour(bpy.types.Operator):
+    """Show the last render's luminance in false colour (logarithmic, cd/m² with a legend) as the image
+    "HUD False Colour"; renders written to a file also get it beside them (<file>.falsecolour.png)"""
+
+    bl_idname = "hud.show_false_colour"
+    bl_label = "Show False Colour"
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene.name in engine.FALSE_COLOUR
+
+    def execute(self, context):
+        rgb, info = engine.FALSE_COLOUR[context.scene.name]
+        show_image(context, "HUD False Colour", rgb)
+        self.report({"INFO"}, f"HUD False Colour: {info['lo']:.3g} to {info['hi']:.3g} cd/m² ({info['decades']} "
+                              "decades, logarithmic)")
+        return {"FINISHED"}
+
+
+class HUD_OT_eyebox_sweep(bpy.types.Operator):
+    """Sweep the eye over a grid of positions around the camera and find the eyebox: where every point of
+    the display (its centre and corners, every LCD cell clear) keeps the threshold share of its luminance
+    at the camera (brightness-theorem analysis, no noise). Writes eyebox.csv, eyebox.png and eyebox.json"""
+
+    bl_idname = "hud.eyebox_sweep"
+    bl_label = "Eyebox Sweep"
+
+    def execute(self, context):
+        scene = context.scene
+        s = scene.hud
+        folder = Path(bpy.path.abspath(s.eyebox_folder))
+        if s.eyebox_folder.startswith("//") and not bpy.data.filepath:
+            self.report({"ERROR"}, "Eyebox Sweep: the folder is relative to the .blend, which is not saved: save it "
+                                   "or choose an absolute folder")
+            return {"CANCELLED"}
+        half = (s.eyebox_half_width_mm, s.eyebox_half_height_mm)
+        field = None if s.eyebox_field == "AUTO" else tuple(s.eyebox_field_deg)
+        wm = context.window_manager
+        wm.progress_begin(0.0, 1.0)
+        try:
+            with tempfile.TemporaryDirectory(prefix="hud-eyebox-") as tmp:
+                exported = export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene")
+                try:
+                    world = World(load_scene(exported))
+                except SceneError as e:
+                    raise ValueError(blender_terms(e, exported, scene)) from None
+                outputs = OutputSet(folder, EYEBOX_FILES).open()  # checked and locked before the sweep
+                try:
+                    result = eyebox_scan(world, half, s.eyebox_step_mm, field, s.eyebox_threshold,
+                                         progress=lambda f, _m: wm.progress_update(f))
+                    outputs.commit(eyebox_files(result))
+                    outputs.keep()
+                finally:
+                    outputs.close()
+        except (ScanArgumentError, FieldNotFound, TracerError, ValueError, OSError) as e:
+            self.report({"ERROR"}, f"Eyebox Sweep: {e}")
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        summary = result.summary()
+        EYEBOX[scene.name] = {"summary": summary, "region": result.region.tolist(), "folder": str(folder),
+                              "right_mm": result.right_mm.tolist(), "up_mm": result.up_mm.tolist()}
+        chart = bpy.data.images.load(str(folder / "eyebox.png"), check_existing=True)
+        chart.reload()
+        f = summary["figures"]
+        if not result.valid:
+            self.report({"WARNING"}, f"Eyebox Sweep: not valid: {'; '.join(result.reasons)}")
+        else:
+            self.report({"INFO"}, f"eyebox {f['width_mm']:.1f} x {f['height_mm']:.1f} mm, uniformity "
+                                  f"{f['uniformity']['eyebox']:.2f}; written to {folder}")
+        return {"FINISHED"}
+
+
+CLASSES = (HUD_OT_add_preset, HUD_OT_export_scene, HUD_OT_show_light_paths, HUD_OT_show_false_colour,
+           HUD_OT_eyebox_sweep)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -11,6 +11,7 @@ from bpy.props import (
     FloatVectorProperty,
     IntProperty,
     PointerProperty,
+    StringProperty,
 )
 
 from ..tracer.integrators import DEFAULT_METHOD, INTEGRATORS
@@ -18,6 +19,7 @@ from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.schema import check_consistent
 from .schema_ui import annotations
+from .units import angle_twin, length_twin
 
 
 def _method_items(self, context):
@@ -60,6 +62,34 @@ def _scene_annotations() -> dict:
         "seconds": FloatProperty(name="Seconds", default=10.0, min=0.01, description="Render time, s"),
         "rays": IntProperty(name="Rays", default=10_000_000, min=1, description="Ray segments to trace"),
         "seed": IntProperty(name="Seed", default=0, min=0, description="Seed of the random streams"),
+        # The eyebox sweep (HUD Readouts panel): lengths stored in mm, shown in the scene's units.
+        "eyebox_half_width_mm": FloatProperty(name="Half width", default=60.0, min=0.0, max=1000.0,
+                                              description="Eye offsets to the left and right of the camera, mm"),
+        "eyebox_half_width_mm_shown": length_twin("eyebox_half_width_mm", "Half width",
+                                                  "Eye offsets scanned to the left and right of the camera",
+                                                  nonnegative=True),
+        "eyebox_half_height_mm": FloatProperty(name="Half height", default=30.0, min=0.0, max=1000.0,
+                                               description="Eye offsets below and above the camera, mm"),
+        "eyebox_half_height_mm_shown": length_twin("eyebox_half_height_mm", "Half height",
+                                                   "Eye offsets scanned below and above the camera", nonnegative=True),
+        "eyebox_step_mm": FloatProperty(name="Step", default=5.0, min=0.01, max=1000.0,
+                                        description="Step of the grid of eye offsets, mm"),
+        "eyebox_step_mm_shown": length_twin("eyebox_step_mm", "Step", "Step of the grid of eye offsets",
+                                            nonnegative=True),
+        "eyebox_threshold": FloatProperty(name="Threshold", default=0.5, min=0.01, max=1.0, subtype="FACTOR",
+                                          description="Share of its luminance at the design eye that every point "
+                                                      "of the display must keep inside the eyebox"),
+        "eyebox_field": EnumProperty(name="Display field", items=[
+            ("AUTO", "From the scene", "The angular extent of what the camera sees of the LCD"),
+            ("GIVEN", "Given", "A field of view centred on the camera's axis")], default="AUTO",
+            description="The display field whose centre and corners are checked"),
+        "eyebox_field_deg": FloatVectorProperty(name="Field", size=2, default=(6.0, 2.0), min=0.01, max=179.0,
+                                                description="Full width and height of the display field, degrees"),
+        "eyebox_field_deg_shown": angle_twin("eyebox_field_deg", "Field",
+                                             "Full width and height of the display field", size=2),
+        "eyebox_folder": StringProperty(name="Folder", default="//eyebox/", subtype="DIR_PATH",
+                                        description="Where eyebox.csv, eyebox.png and eyebox.json are written "
+                                                    "(// is the .blend's folder)"),
     }
     for name, cls in INTEGRATORS.items():
         annotations(cls.options, f"{name}_", seen=ann)
@@ -95,23 +125,35 @@ class HudCameraSettings(bpy.types.PropertyGroup):
                                              ("AUTO", "From adaptation", "Watson & Yellott 2012 from the "
                                               "adaptation luminance")], default="FIXED",
                         description="A fixed pupil or one that follows the adaptation luminance")
-    pupil_diameter_mm: FloatProperty(name="Pupil, mm", default=4.0, min=0.01, description="Pupil diameter, mm")
+    pupil_diameter_mm: FloatProperty(name="Pupil diameter", default=4.0, min=0.01, max=20.0,
+                                     description="Diameter of the eye's entrance pupil, mm")
+    pupil_diameter_mm_shown: length_twin("pupil_diameter_mm", "Pupil diameter",
+                                         "Diameter of the eye's entrance pupil (2 mm in bright daylight, 8 mm at "
+                                         "night)", nonnegative=True)
     adaptation_luminance: FloatProperty(
-        name="Adaptation, cd/m²", default=0.0, min=0.0,
+        name="Adaptation luminance", default=0.0, min=0.0,
         description="Luminance the eye is adapted to, cd/m^2; 0: the environment's mean")
-    observer_age: FloatProperty(name="Age, years", default=30.0, min=1.0, max=120.0,
-                                description="Observer's age (Watson & Yellott's age term), years")
-    focal_length_mm: FloatProperty(name="Eye focal length, mm", default=16.67, min=0.1,
+    observer_age: FloatProperty(name="Observer age", default=30.0, min=1.0, max=120.0,
+                                description="Observer's age in years (Watson & Yellott's age term)")
+    focal_length_mm: FloatProperty(name="Eye focal length", default=16.67, min=0.1, max=1000.0,
                                    description="Focal length of the thin-lens eye, mm (16.67: Emsley's reduced eye)")
-    accommodation_distance_mm: FloatProperty(name="Accommodation, mm", default=2500.0, min=0.0,
+    focal_length_mm_shown: length_twin("focal_length_mm", "Eye focal length",
+                                       "Focal length of the thin-lens eye (16.67 mm: Emsley's reduced eye); it sets "
+                                       "the retina's scale, not the field of view (that is the camera's lens)",
+                                       nonnegative=True)
+    accommodation_distance_mm: FloatProperty(name="Accommodation", default=2500.0, min=0.0,
                                              description="Focus distance, mm; 0 means infinity")
+    accommodation_distance_mm_shown: length_twin("accommodation_distance_mm", "Accommodation",
+                                                 "Distance the eye focuses at (a HUD's virtual image: 2 to 15 m); "
+                                                 "0 means infinity", nonnegative=True)
 
 
 class HudWorldSettings(bpy.types.PropertyGroup):
     kind: EnumProperty(name="Environment", items=[("none", "None", "Black"), ("uniform", "Uniform", "One luminance"),
                                                   ("hdri", "HDRI panorama", "An equirectangular panorama")],
                        default="none", description="What rays that leave the scene see")
-    luminance: FloatProperty(name="Luminance, cd/m²", default=100.0, min=0.0, description="Uniform luminance, cd/m^2")
+    luminance: FloatProperty(name="Luminance", default=100.0, min=0.0,
+                             description="Uniform luminance of the environment, cd/m^2")
     color: FloatVectorProperty(name="Color", subtype="COLOR", size=3, min=0, default=(1.0, 1.0, 1.0),
                                description="Linear Rec.709 colour, scaled to the luminance")
     image: PointerProperty(name="Panorama", type=bpy.types.Image, description="Equirectangular HDR panorama")
@@ -119,8 +161,10 @@ class HudWorldSettings(bpy.types.PropertyGroup):
                                                          ("mean", "Mean", "Mean luminance, cd/m^2"),
                                                          ("max", "Max", "Maximum luminance, cd/m^2")], default="mean",
                               description="How the panorama's values become cd/m^2")
-    value: FloatProperty(name="Value", default=1000.0, min=1e-9, description="The factor, or the target cd/m^2")
-    rotation_deg: FloatProperty(name="Rotation, deg", default=0.0, description="Turn about +z, degrees")
+    value: FloatProperty(name="Value", default=1000.0, min=1e-9,
+                         description="The factor (Scale), or the target luminance in cd/m^2 (Mean, Max)")
+    rotation_deg: FloatProperty(name="Rotation", default=0.0, description="Turn of the panorama about +z, degrees")
+    rotation_deg_shown: angle_twin("rotation_deg", "Rotation", "Turn of the panorama about +z")
 
 
 CLASSES = (HudSceneSettings, HudObjectSettings, HudCameraSettings, HudWorldSettings)

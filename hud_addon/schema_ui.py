@@ -27,6 +27,19 @@ from bpy.props import (
 )
 
 from ..tracer.schema import REQUIRED, Field, to_json
+from .units import SHOWN, angle_twin, length_twin
+
+#: Field kinds with one value (size 0) or two.
+_SIZES = {"number": 0, "pair": 2, "vector2": 2}
+
+
+def twin(f: Field, name: str):
+    """The property Blender shows for a field in mm or degrees (hud_addon/units.py), or None."""
+    if f.kind in _SIZES and f.unit == "mm":
+        return length_twin(name, f.title, _tooltip(f), _SIZES[f.kind], nonnegative=(f.minimum or 0) >= 0)
+    if f.kind in _SIZES and f.unit == "deg":
+        return angle_twin(name, f.title, _tooltip(f), _SIZES[f.kind])
+    return None
 
 
 def _tooltip(f: Field) -> str:
@@ -85,6 +98,9 @@ def annotations(fields: tuple[Field, ...], prefix: str = "", alternatives=(), se
             annotations(f.fields, f"{prefix}{f.name}_", f.alternatives, out)
         else:
             out.setdefault(prefix + f.name, prop(f))
+            shown = twin(f, prefix + f.name)
+            if shown is not None:
+                out.setdefault(SHOWN.format(prefix + f.name), shown)
     if alternatives:
         out.setdefault(f"{prefix}by", _alternative_enum(alternatives, fields, "Given by"))
     return out
@@ -111,8 +127,38 @@ def draw(layout, owner, fields, prefix: str = "", alternatives=()):
                 draw(box, owner, f.fields, f"{prefix}{f.name}_", f.alternatives)
         elif f.kind == "image":
             layout.template_ID(owner, prefix + f.name, open="image.open")
+        elif _encoding_field(f, fields):
+            image = getattr(owner, prefix + f.name[: -len("_encoding")])
+            layout.label(text=f"{f.title}: from the image's Color Space"
+                              + (f" ({image.colorspace_settings.name})" if image is not None else ""))
         else:
-            layout.prop(owner, prefix + f.name)
+            shown = SHOWN.format(prefix + f.name)
+            layout.prop(owner, shown if shown in owner.bl_rna.properties else prefix + f.name)
+
+
+#: Blender colour spaces whose byte values the tracer reads as sRGB-encoded, and those it reads as they
+#: are (linear transmittance). Float images are linear in Blender whatever their colour space.
+SRGB_SPACES = frozenset({"sRGB"})
+LINEAR_SPACES = frozenset({"Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65"})
+
+
+def _encoding_field(f: Field, fields) -> bool:
+    """Whether ``f`` is the encoding of a sibling image field (tracer.schema's ``<name>_encoding``)."""
+    return f.kind == "choice" and f.name.endswith("_encoding") and any(
+        g.kind == "image" and f.name == f"{g.name}_encoding" for g in fields)
+
+
+def image_encoding(image, title: str) -> str:
+    """How the tracer decodes ``image``'s values, from Blender's own setting of it (issue 11, finding 6):
+    a float image holds linear values; a byte image's Color Space says sRGB or linear. Raises
+    ValueError naming the image for a colour space the tracer cannot read a transmittance from."""
+    space = image.colorspace_settings.name
+    if image.is_float or space in LINEAR_SPACES:
+        return "linear"
+    if space in SRGB_SPACES:
+        return "srgb"
+    raise ValueError(f"{title}: image {image.name!r} has the Color Space {space!r}; a slide's values are "
+                     "transmittances: set it to sRGB (8-bit values sRGB-encoded) or Non-Color (linear)")
 
 
 def export(owner, fields, prefix: str = "", alternatives=(), save_image=None) -> dict:
@@ -132,6 +178,10 @@ def export(owner, fields, prefix: str = "", alternatives=(), save_image=None) ->
             if value is None:
                 raise ValueError(f"{f.title}: choose an object")
             out[f.name] = value.name
+        elif _encoding_field(f, fields):
+            image = getattr(owner, prefix + f.name[: -len("_encoding")])
+            if image is not None:
+                out[f.name] = image_encoding(image, next(g.title for g in fields if f.name == f"{g.name}_encoding"))
         elif f.kind in ("rgb", "pair", "vector2"):
             out[f.name] = to_json(f, np.array(value))
         else:
@@ -157,6 +207,9 @@ def apply(owner, fields, spec: dict, prefix: str = "", alternatives=(), root: Pa
         elif f.kind == "image":
             img = bpy.data.images.load(str(Path(root) / value), check_existing=False)
             img.pack()
+            if not img.is_float and f"{f.name}_encoding" in {g.name for g in fields}:
+                linear = spec.get(f"{f.name}_encoding", "srgb") == "linear"
+                img.colorspace_settings.name = "Non-Color" if linear else "sRGB"
             setattr(owner, name, img)
         elif f.kind == "object_ref":
             setattr(owner, name, objects[value])

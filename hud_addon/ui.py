@@ -2,10 +2,11 @@
 
 import bpy
 
+from ..tracer.hudfigures import readouts
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
-from . import schema_ui
+from . import engine, operators, schema_ui
 
 ENGINE = "HUD_TRACER"
 
@@ -35,13 +36,79 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
             box = col.box()
             box.label(text=f"{s.method.capitalize()} options")
             schema_ui.draw(box, s, INTEGRATORS[s.method].options, f"{s.method}_")
+        if s.method == "forward" and not _aimed(context.scene):
+            box = col.box()
+            for line in ("Forward tracing reaches the eye's pupil only by chance:",
+                         "give the emitters (Emission > Aim) or the scattering surfaces",
+                         "(Aim) a target: the eye pupil, or the aperture the light leaves by."):
+                box.label(text=line, icon="INFO" if line.startswith("Forward") else "BLANK1")
         r = context.scene.render
         col.label(text=f"Retina: {r.resolution_x * r.resolution_percentage // 100} x "
-                       f"{r.resolution_y * r.resolution_percentage // 100} px (Output properties)")
+                       f"{r.resolution_y * r.resolution_percentage // 100} px (Output > Format)")
+        row = col.row(align=True)  # Blender's own setting, which its Performance panel shows for Cycles only
+        row.prop(r, "threads_mode", text="Processes")
+        sub = row.row(align=True)
+        sub.enabled = r.threads_mode == "FIXED"
+        sub.prop(r, "threads", text="")
         row = col.row()
         row.operator("hud.add_preset")
         row.operator("hud.export_scene")
         col.operator("hud.show_light_paths")
+
+
+def _aimed(scene) -> bool:
+    """Whether any object of the scene aims its emission or its scattering (the forward method's
+    directed sampling, paper sec. 2)."""
+    return any(o.hud.role != "none" and (o.hud.aim != "NONE" or (o.hud.emits and o.hud.emission_aim != "NONE"))
+               for o in scene.objects)
+
+
+class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
+    """What an HUD engineer reads off the last render (its report) and the last eyebox sweep."""
+
+    bl_label = "HUD Readouts"
+    bl_context = "render"
+
+    def draw(self, context):
+        scene = context.scene
+        col = self.layout.column()
+        report = engine.REPORTS.get(scene.name)
+        if report is None:
+            col.label(text="Render (F12) to see the figures of the image")
+        else:
+            grid = col.grid_flow(row_major=True, columns=2, even_columns=False)
+            for label, text in readouts(report):
+                grid.label(text=label)
+                grid.label(text=text)
+            for w in report["warnings"]:
+                col.label(text=w[:120], icon="ERROR")
+            col.operator("hud.show_false_colour", icon="IMAGE")
+        box = col.box()
+        box.label(text="Eyebox")
+        s = scene.hud
+        for name in ("eyebox_half_width_mm_shown", "eyebox_half_height_mm_shown", "eyebox_step_mm_shown",
+                     "eyebox_threshold", "eyebox_field"):
+            box.prop(s, name)
+        if s.eyebox_field == "GIVEN":
+            box.prop(s, "eyebox_field_deg_shown")
+        box.prop(s, "eyebox_folder")
+        box.operator("hud.eyebox_sweep", icon="PIVOT_BOUNDBOX")
+        sweep = operators.EYEBOX.get(scene.name)
+        if sweep is not None:
+            summary = sweep["summary"]
+            f = summary["figures"]
+            if f is None:
+                for reason in summary["reasons"]:
+                    box.label(text=f"not valid: {reason}"[:120], icon="ERROR")
+                return
+            box.label(text=f"Eyebox {f['width_mm']:.1f} x {f['height_mm']:.1f} mm"
+                           + (" (reaches the scan's edge: widen it)" if f["reaches_scan_edge"] else ""))
+            avg = f["field_average_cd_m2"]
+            box.label(text=f"Display average {avg['min']:,.4g} to {avg['max']:,.4g} cd/m² (design eye "
+                           f"{avg['design_eye']:,.4g})")
+            box.label(text=f"Uniformity {f['uniformity']['design_eye']:.2f} at the design eye, "
+                           f"{f['uniformity']['eyebox']:.2f} over the eyebox")
+            box.label(text=f"Written to {sweep['folder']} (chart: image eyebox.png)")
 
 
 class HUD_PT_object(_HudPanel, bpy.types.Panel):
@@ -93,12 +160,12 @@ class HUD_PT_eye(_HudPanel, bpy.types.Panel):
         col = self.layout.column()
         col.prop(h, "pupil")
         if h.pupil == "FIXED":
-            col.prop(h, "pupil_diameter_mm")
+            col.prop(h, "pupil_diameter_mm_shown")
         else:
-            col.prop(h, "adaptation_luminance")
-            col.prop(h, "observer_age")
-        col.prop(h, "focal_length_mm")
-        col.prop(h, "accommodation_distance_mm")
+            col.prop(h, "adaptation_luminance", text="Adaptation (cd/m²)")
+            col.prop(h, "observer_age", text="Age (years)")
+        col.prop(h, "focal_length_mm_shown")
+        col.prop(h, "accommodation_distance_mm_shown")
 
 
 class HUD_PT_world(_HudPanel, bpy.types.Panel):
@@ -114,19 +181,20 @@ class HUD_PT_world(_HudPanel, bpy.types.Panel):
         col = self.layout.column()
         col.prop(h, "kind")
         if h.kind == "uniform":
-            col.prop(h, "luminance")
+            col.prop(h, "luminance", text="Luminance (cd/m²)")
             col.prop(h, "color")
         elif h.kind == "hdri":
             col.template_ID(h, "image", open="image.open")
             col.prop(h, "calibration")
-            col.prop(h, "value")
-            col.prop(h, "rotation_deg")
+            col.prop(h, "value", text="Factor" if h.calibration == "scale" else "Luminance (cd/m²)")
+            col.prop(h, "rotation_deg_shown")
 
 
-CLASSES = (HUD_PT_render, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
+CLASSES = (HUD_PT_render, HUD_PT_readouts, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
 
 #: Blender's own panels that apply to HUD Tracer renders: resolution, frame range, output and colour
-#: management, the camera's lens and display, the mesh's UV maps (an LCD slide needs them). The engine
+#: management, the camera's lens and display, the mesh's UV maps (an LCD slide needs them) and Metadata
+#: (the EXR's header, with the hud:* fields). The engine
 #: joins their COMPAT_ENGINES on register and leaves on unregister, as Blender's render-engine template
 #: and BlendLuxCore do; panels whose settings the tracer does not use (the camera's depth of field: the
 #: eye's pupil and accommodation are on the HUD Eye panel) stay hidden.
@@ -136,7 +204,7 @@ BUILTIN_PANELS = (
     "RENDER_PT_color_management_curves", "RENDER_PT_color_management_display_settings",
     "RENDER_PT_color_management_white_balance", "DATA_PT_context_camera", "DATA_PT_camera", "DATA_PT_lens",
     "DATA_PT_camera_display", "DATA_PT_camera_safe_areas", "DATA_PT_context_mesh", "DATA_PT_uv_texture",
-    "DATA_PT_vertex_groups")
+    "DATA_PT_vertex_groups", "RENDER_PT_stamp", "RENDER_PT_stamp_note", "RENDER_PT_stamp_burn")
 
 
 def builtin_panels() -> list:

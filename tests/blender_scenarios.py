@@ -263,6 +263,58 @@ def scenario_instances(out):
     return {"places": places}
 
 
+def scenario_preset_twice():
+    """Add HUD Preset on Blender's startup scene, twice, then once more without replacing (issue 11,
+    finding 9)."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    scene = bpy.context.scene
+    startup = sorted(o.name for o in scene.objects)
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    first = sorted(o.name for o in scene.objects)
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    second = sorted(o.name for o in scene.objects)
+    led = next(o for o in scene.objects if o.hud.emits)
+    led_area = sum(poly.area for poly in led.data.polygons)  # Blender units squared
+    cam = scene.camera.data.hud
+    shown_mm = {"pupil": cam.pupil_diameter_mm_shown, "stored": cam.pupil_diameter_mm}
+    units = {"scale_length": scene.unit_settings.scale_length, "length_unit": scene.unit_settings.length_unit}
+    bpy.ops.hud.add_preset(preset="analytic-mirror", replace=False)
+    kept = sorted(c.name for c in scene.collection.children)
+    scene.unit_settings.scale_length = 1.0  # a scene in metres shows the same pupil as 0.004 m
+    shown_m = cam.pupil_diameter_mm_shown
+    cam.pupil_diameter_mm_shown = 0.003  # set in metres, stored in mm
+    stored_after = cam.pupil_diameter_mm
+    disable(module)
+    return {"startup": startup, "first": first, "second": second, "led_area": led_area, "units": units,
+            "shown_mm": shown_mm, "collections": kept, "shown_m": shown_m, "stored_after": stored_after}
+
+
+def scenario_colour_space(out):
+    """An LCD's slide encoding follows the image's own Color Space (issue 11, finding 6)."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    lcd = next(o for o in bpy.context.scene.objects if o.hud.role == "lcd")
+    image = lcd.hud.image
+    lcd.hud.image_encoding = "linear"  # the old Encoding property: no longer what decides
+    result = {"spaces": {}}
+    for space in ("sRGB", "Non-Color", "ACEScg"):
+        try:
+            image.colorspace_settings.name = space
+        except TypeError:
+            continue  # not in this Blender's OCIO configuration
+        try:
+            bpy.ops.hud.export_scene(directory=str(Path(out) / space))
+            data = json.loads((Path(out) / space / "scene.json").read_text())
+            mat = next(o["material"] for o in data["objects"] if o["material"]["type"] == "lcd")
+            result["spaces"][space] = mat["image_encoding"]
+        except RuntimeError as e:
+            result["spaces"][space] = "error: " + str(e)
+    result["is_float"] = image.is_float
+    result["image"] = image.name
+    disable(module)
+    return result
+
+
 def scenario_tooltips():
     """Every property of the add-on's property groups, as registered, with its description (issue 11,
     finding 9: properties without a tooltip)."""
@@ -512,8 +564,9 @@ def scenario_light_paths():
     verts = [tuple(v.co) for v in obj.data.vertices]
     edges = len(obj.data.edges)
     eye = tuple(bpy.context.scene.camera.location)
+    mm = 1000.0 * bpy.context.scene.unit_settings.scale_length
     disable(module)
-    return {"vertices": verts, "edges": edges, "eye": eye}
+    return {"vertices": verts, "edges": edges, "eye": eye, "mm_per_unit": mm}
 
 
 def scenario_no_light():
@@ -537,6 +590,70 @@ def scenario_unregister():
     engines = bpy.context.scene.render.bl_rna.properties["engine"].enum_items.keys()
     return {"before": before, "after": hud_names(), "props_before": props_before, "props_after": props_after,
             "engines": [e for e in ("HUD_TRACER",) if e in engines]}
+
+
+def scenario_save_generated_hdri(path):
+    """analytic-mirror with an HDRI environment whose image is generated, filled, neither saved nor
+    packed, saved into a .blend (its pixels are gone when the file is opened again)."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    img = bpy.data.images.new("sky", 64, 32, float_buffer=True)
+    img.pixels.foreach_set([1.0] * (64 * 32 * 4))
+    world = bpy.context.scene.world
+    world.hud.kind, world.hud.image = "hdri", img
+    warnings = sys.modules[f"{module}.hud_addon.export"].generated_image_warnings(bpy.context.scene)
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    disable(module)
+    return {"warnings": warnings}
+
+
+class _Layout:
+    """Stands in for a panel's layout: counts the labels drawn."""
+
+    def __init__(self, counter):
+        self.counter = counter
+
+    def label(self, text="", icon="NONE"):
+        self.counter.append(text)
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "grid_flow"):
+            return lambda *a, **k: _Layout(self.counter)
+        return lambda *a, **k: None
+
+
+def scenario_readouts(out):
+    """hud-direct rendered with write_still into out/frame.exr, the HUD Readouts panel drawn, the false
+    colour shown, an eyebox sweep with the command line's grid (+-90 x +-30 mm, 10 mm) into out/eyebox."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    scene.hud.method, scene.hud.budget, scene.hud.rays, scene.hud.seed = "backward", "RAYS", 2_000_000, 1
+    s = scene.render.image_settings
+    s.file_format, s.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(Path(out) / "frame.exr")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    pkg = f"{module}.hud_addon"
+    engine_mod, ui_mod = sys.modules[f"{pkg}.engine"], sys.modules[f"{pkg}.ui"]
+    rows = sys.modules[f"{module}.tracer.hudfigures"].readouts(engine_mod.REPORTS[scene.name])
+    labels = []
+
+    class Panel:
+        layout = _Layout(labels)
+
+    ui_mod.HUD_PT_readouts.draw(Panel(), bpy.context)
+    bpy.ops.hud.show_false_colour()
+    image = bpy.data.images["HUD False Colour"]
+    expected = engine_mod.FALSE_COLOUR[scene.name][0].shape
+    h = scene.hud
+    h.eyebox_half_width_mm, h.eyebox_half_height_mm, h.eyebox_step_mm = 90.0, 30.0, 10.0
+    h.eyebox_folder = str(Path(out) / "eyebox")
+    bpy.ops.hud.eyebox_sweep()
+    chart = "eyebox.png" in bpy.data.images
+    disable(module)
+    return {"rows": rows, "panel_labels": len(labels), "eyebox_image": chart,
+            "false_colour": {"size": list(image.size), "expected_size": [expected[1], expected[0]]}}
 
 
 def scenario_save_blend(path, preset):

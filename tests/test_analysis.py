@@ -177,3 +177,23 @@ def test_a_large_light_close_to_a_screen_keeps_the_fine_quadrature(tmp_path):
     folder = condenser_scene(tmp_path / "s")
     edit_json(folder, lambda d: d.update(objects=[o for o in d["objects"] if o["name"] != "glass"]))
     assert np.all(analysis.quadrature_levels(World(load_scene(folder))) == 4)
+
+
+def test_readouts_give_the_reports_figures(preset, tmp_path):
+    """The HUD Readouts panel's rows (tracer.hudfigures.readouts) state the report's own numbers."""
+    from tracer.hudfigures import readouts
+    from tracer.integrators import Budget
+    from tracer.render import render_scene
+    from tracer.scene import load_scene
+
+    report, _ = render_scene(load_scene(preset("hud-direct")), "backward", Budget(rays=2_000_000), 3, tmp_path / "o")
+    rows = dict(readouts(report))
+    hud, ghost = report["hud"], report["brightness_theorem"]["ghost"]
+    assert rows["Symbols"] == f"{hud['symbol_cd_m2']:,.4g} cd/m²"
+    assert rows["Contrast (Ls + Lb) / Lb"].startswith(f"{hud['contrast_ratio']:,.4g}")
+    assert rows["Ghost"].startswith(f"{ghost['ratio_to_symbol']:.3g} of the symbols, {ghost['offset_mrad']:.3g} mrad")
+    assert f"{report['rays']:,}" in rows["Rays"] and "Spot" in rows
+    # A stopped render has no analysis: the rows it cannot fill are left out.
+    partial = dict(report, hud=None, brightness_theorem=None, partial=True)
+    rows = dict(readouts(partial))
+    assert "Symbols" not in rows and "Ghost" not in rows and rows["Rays"].endswith("stopped early")

@@ -180,13 +180,40 @@ def test_hud_render_renders_a_saved_blend(tmp_path):
                            "--method", "backward", "--seed", "2"], capture_output=True, text=True, timeout=600,
                           cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert sorted(p.name for p in out.iterdir()) == ["image.exr", "report.json"]  # a set, nothing else
+    assert sorted(p.name for p in out.iterdir()) == ["falsecolour.png", "image.exr", "report.json"]  # a set
     report = json.loads((out / "report.json").read_text())
     assert report["method"] == "backward" and report["rays"] >= 600_000 and report["seed"] == 2
-    assert len(report["run_id"]) == 32
+    assert len(report["run_id"]) == 32 and report["blend"] == str(blend)
+    # The command line's report (issue 11, finding 8): rays/s, noise, log-average, the analysis.
+    assert report["rays_per_second"] > 0 and report["noise"]["median_relative_standard_error_lit_pixels"] > 0
+    assert report["luminance"]["log_average"] > 0 and report["brightness_theorem"]["image"]["predicted_cd_m2"] > 0
     ch = read_multilayer(out / "image.exr")
     y = ch["ViewLayer.Y.X"]
     assert np.all(np.isfinite(y)) and abs(y.max() - 850.0) < 0.02 * 850
+    from tracer.falsecolour import false_colour
+    from tracer.imageio import read_image
+
+    expected, _ = false_colour(y.astype(np.float64))
+    got = np.rint(read_image(out / "falsecolour.png", linear=True) * 255).astype(np.uint8)
+    assert got.shape == expected.shape and np.abs(got.astype(int) - expected).max() <= 1
+
+
+def test_hud_render_names_the_world_image_that_lost_its_pixels(tmp_path):
+    """Issue 11, finding 4: a .blend whose HDRI is a generated image that was never saved or packed:
+    hud-render exits 2 with one line that names the World and the image (not a temporary scene.json),
+    and says why its pixels are gone; nothing is written."""
+    blend = tmp_path / "generated.blend"
+    scenario("save_generated_hdri", blend)
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), "--rays",
+                           "100000"], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1, proc.stderr
+    line = errors[0]
+    assert "World 'World'" in line and "HDRI image 'sky'" in line and "generated image" in line and "Pack" in line
+    assert "scene.json" not in line and "hud-blender-" not in line
+    assert not out.exists() or list(out.iterdir()) == []
 
 
 @pytest.mark.parametrize("case", ["--out is a file", "--seconds nan"])
@@ -221,9 +248,9 @@ def test_show_light_paths_draws_paths_that_end_at_the_eye():
     res, _ = scenario("light_paths")
     verts = np.array(res["vertices"])
     assert res["edges"] > 0 and len(verts) > 0
-    # Every drawn path ends in the pupil: the closest vertices sit at the eye (4 mm pupil, in metres).
-    dist = np.linalg.norm(verts - np.array(res["eye"]), axis=1)
-    assert np.sort(dist)[:10].max() < 0.0021
+    # Every drawn path ends in the pupil: the closest vertices sit at the eye (4 mm pupil).
+    dist_mm = np.linalg.norm(verts - np.array(res["eye"]), axis=1) * res["mm_per_unit"]
+    assert np.sort(dist_mm)[:10].max() < 2.001
 
 
 def test_render_reports_no_light_to_the_user():
@@ -366,6 +393,10 @@ def test_an_animated_camera_renders_each_frame_from_its_own_eye(tmp_path):
     for frame, dx in (("1", -50.0), ("2", 0.0), ("3", 50.0)):
         assert res["exported_eye_mm"][frame][0] == pytest.approx(x0 + dx, abs=1e-3)
     assert len(set(res["run_ids"].values())) == 3  # three renders, one per frame
+    for k, name in enumerate(res["files"], start=1):  # each frame's report and false colour beside it
+        beside = json.loads((tmp_path / f"{name}.report.json").read_text())
+        assert beside["blender"]["frame"] == k and beside["run_id"] == res["run_ids"][str(k)]
+        assert (tmp_path / f"{name}.falsecolour.png").is_file()
     centroids = []
     for name in res["files"]:
         y = read_multilayer(tmp_path / name)["ViewLayer.Y.X"]
@@ -392,3 +423,50 @@ def test_collection_instances_export_as_objects_and_hide_render_is_honoured(tmp_
     for name, inst in (("mirror @ inst_a 1", "inst_a"), ("mirror @ inst_b 1", "inst_b")):
         np.testing.assert_allclose(sc.object(name).vertices.mean(axis=0), res["places"][inst], atol=1e-6)
         assert sc.object(name).area_mm2 == pytest.approx(400.0)
+
+
+def test_add_hud_preset_builds_in_millimetres_and_replaces_the_previous_one():
+    """Issue 11, finding 9: on Blender's startup scene the preset replaces the startup cube and is built
+    in a collection in millimetres (1 unit = 1 mm: hud-direct's LED dies are 0.2 units wide); pressed
+    again it replaces itself (no "Eye.001"); with Replace off it adds beside. Lengths show in the
+    scene's unit system and are stored in mm."""
+    res, _ = scenario("preset_twice")
+    assert "Cube" in res["startup"] and "Cube" not in res["first"]
+    assert res["second"] == res["first"] and not any(n.endswith(".001") for n in res["second"])
+    assert res["units"]["length_unit"] == "MILLIMETERS" and res["units"]["scale_length"] == pytest.approx(0.001)
+    assert res["led_area"] == pytest.approx(0.2 * 0.2, rel=1e-3)  # a 0.2 x 0.2 mm die, in mm^2
+    assert res["shown_mm"] == {"pupil": pytest.approx(4.0), "stored": pytest.approx(4.0)}
+    assert [c for c in res["collections"] if c.startswith("HUD")] == ["HUD analytic-mirror", "HUD hud-direct"]
+    assert res["shown_m"] == pytest.approx(0.004) and res["stored_after"] == pytest.approx(3.0)
+
+
+def test_lcd_slide_encoding_follows_the_image_color_space(tmp_path):
+    """Issue 11, finding 6: an 8-bit slide in sRGB exports as sRGB-encoded, in Non-Color as linear,
+    whatever the old Encoding property says; a colour space the tracer cannot read a transmittance from
+    is refused, naming the image."""
+    res, _ = scenario("colour_space", tmp_path)
+    assert res["is_float"] is False
+    assert res["spaces"]["sRGB"] == "srgb" and res["spaces"]["Non-Color"] == "linear"
+    if "ACEScg" in res["spaces"]:
+        msg = res["spaces"]["ACEScg"]
+        assert msg.startswith("error:") and res["image"] in msg and "ACEScg" in msg
+
+
+def test_readouts_panel_false_colour_and_eyebox_sweep_work_on_hud_direct(tmp_path):
+    """Issue 11, Build item 4, in Blender: after a render of hud-direct the HUD Readouts panel lists the
+    report's figures (symbols, background, contrast, ghost); Show False Colour makes the image "HUD False
+    Colour" (the tracer's false-colour view of the render's Y); a render written to a file gets its
+    false-colour view and report beside it; the Eyebox Sweep operator writes eyebox.csv, .png and .json
+    and finds the command line's eyebox."""
+    res, _ = scenario("readouts", tmp_path)
+    rows = dict(res["rows"])
+    report = json.loads((tmp_path / "frame.exr.report.json").read_text())
+    assert rows["Symbols"] == f"{report['hud']['symbol_cd_m2']:,.4g} cd/m²"
+    assert "Ghost" in rows and "Contrast (Ls + Lb) / Lb" in rows
+    assert res["panel_labels"] >= 2 * len(res["rows"])  # the panel drew every row (label and value)
+    assert res["false_colour"]["size"] == res["false_colour"]["expected_size"]
+    assert (tmp_path / "frame.exr.falsecolour.png").is_file() and report["image_file"].endswith("frame.exr")
+    assert sorted(p.name for p in (tmp_path / "eyebox").iterdir()) == ["eyebox.csv", "eyebox.json", "eyebox.png"]
+    f = json.loads((tmp_path / "eyebox" / "eyebox.json").read_text())["figures"]
+    assert f["grid_width_mm"] == pytest.approx(120.0) and f["grid_height_mm"] == pytest.approx(40.0)
+    assert res["eyebox_image"] is True

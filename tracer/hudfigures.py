@@ -167,3 +167,41 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
                        "peak_over_symbol": peak / l_sym if l_sym > 0 else None,
                        "half_peak_diameter_deg": diameter, "smoothing_px": 2 * k + 1}
     return out
+
+
+def readouts(report: dict) -> list[tuple[str, str]]:
+    """The figures of a render's report (tracer.render.build_report) as (label, text) rows, for a panel
+    or a summary line: the HUD figures (symbols, background, contrast, the rear-projection spot), the
+    windshield's ghost (from the brightness-theorem analysis), the luminance the eye adapts to, and how
+    well the render converged (noise, efficiency, rays). Rows whose figures the report lacks (a
+    stopped render skips the analysis) are left out."""
+    rows: list[tuple[str, str]] = []
+    hud = report.get("hud") or {}
+    if "symbol_cd_m2" in hud:
+        rows.append(("Symbols", f"{hud['symbol_cd_m2']:,.4g} cd/m²"))
+        rows.append(("Background", f"{hud['background_cd_m2']:,.4g} cd/m²"))
+        rows.append(("Contrast (Ls + Lb) / Lb", f"{hud['contrast_ratio']:,.4g} : 1"))
+    elif "display_cd_m2" in hud:
+        rows.append(("Display", f"{hud['display_cd_m2']:,.4g} cd/m² ({hud.get('note', '')})"))
+    elif hud.get("note"):
+        rows.append(("Display", hud["note"]))
+    spot = hud.get("spot")
+    if spot:
+        rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {spot['peak_over_median_background']:.3g} x the "
+                             f"background, {spot['half_peak_diameter_deg']:.2g} deg"))
+    ghost = (report.get("brightness_theorem") or {}).get("ghost")
+    if ghost and ghost.get("ratio_to_symbol") is not None:
+        dx, dy = ghost["offset_px"]
+        rows.append(("Ghost", f"{ghost['ratio_to_symbol']:.3g} of the symbols, {ghost['offset_mrad']:.3g} mrad "
+                              f"({dx:+d}, {dy:+d} px)"))
+    lum = report["luminance"]
+    rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
+    rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² (log-average)"))
+    noise = report["noise"]["median_relative_standard_error_lit_pixels"]
+    if noise is not None:
+        rows.append(("Noise", f"{100 * noise:.3g} % per lit pixel (median standard error)"))
+    rows.append(("Efficiency", f"{report['efficiency']:.3g}"))
+    rows.append(("Rays", f"{report['rays']:,} in {report['seconds']:.3g} s ({report['rays_per_second'] / 1e6:.3g} M/s, "
+                         f"{report['workers']} process{'es' if report['workers'] > 1 else ''})"
+                         + (", stopped early" if report["partial"] else "")))
+    return rows

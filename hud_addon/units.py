@@ -1,0 +1,66 @@
+"""Blender's units and the tracer's: lengths in mm, angles in degrees.
+
+The tracer's scene format is in millimetres; a Blender unit is ``scale_length`` metres (Scene > Units).
+Values the add-on stores for the tracer keep the tracer's units (a .blend keeps meaning the same
+whatever its unit settings), and each has a twin that Blender shows in its own unit system (a length
+in the scene's length unit, an angle in its rotation unit), which the panels draw: reading the twin
+converts the stored value, setting it converts back (issue 11, finding 9).
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+from bpy.props import FloatProperty, FloatVectorProperty
+
+#: Metres to millimetres.
+M_TO_MM = 1000.0
+#: Name of the twin that Blender shows in its own units.
+SHOWN = "{}_shown"
+
+
+def unit_mm(scene) -> float:
+    """Millimetres per Blender unit of ``scene``."""
+    return M_TO_MM * scene.unit_settings.scale_length
+
+
+def _mm_per_unit() -> float:
+    scene = bpy.context.scene
+    return unit_mm(scene) if scene is not None else M_TO_MM
+
+
+def _twin(stored: str, size: int, to_shown, from_shown, **kw):
+    """A property whose value is ``to_shown(stored value)`` and which stores ``from_shown(value)``."""
+    if size:
+        def get(self):
+            return tuple(to_shown(v) for v in getattr(self, stored))
+
+        def set_(self, value):
+            setattr(self, stored, tuple(from_shown(v) for v in value))
+
+        return FloatVectorProperty(size=size, get=get, set=set_, **kw)
+
+    def get1(self):
+        return to_shown(getattr(self, stored))
+
+    def set1(self, value):
+        setattr(self, stored, from_shown(value))
+
+    return FloatProperty(get=get1, set=set1, **kw)
+
+
+def length_twin(stored: str, name: str, description: str, size: int = 0, nonnegative: bool = False):
+    """The twin of a length stored in mm, shown in the scene's length unit (the stored property keeps
+    its own bounds, in mm, and clamps to them)."""
+    kw = {"name": name, "description": description, "unit": "LENGTH",
+          "subtype": "TRANSLATION" if size else "DISTANCE"}
+    if nonnegative:
+        kw["min"] = 0.0
+    return _twin(stored, size, lambda v: v / _mm_per_unit(), lambda v: v * _mm_per_unit(), **kw)
+
+
+def angle_twin(stored: str, name: str, description: str, size: int = 0):
+    """The twin of an angle stored in degrees, shown in the scene's rotation unit."""
+    kw = {"name": name, "description": description, "unit": "ROTATION", "subtype": "EULER" if size else "ANGLE"}
+    return _twin(stored, size, math.radians, math.degrees, **kw)
