@@ -251,3 +251,24 @@ def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tm
     with pytest.raises(RuntimeError, match="could not start: SceneError: .*scene.json: scene file not found"):
         render_parallel(integrator, Budget(rays=100_000), workers=2)
     assert time.perf_counter() - t0 < 60
+
+
+def test_readouts_prints_the_reports_figures(tmp_path):
+    """hud-trace readouts DIR prints one row per figure of the report (the add-on's HUD Readouts); a file
+    that is not a report gives one line and exit 2."""
+    from tracer.cli import main
+    from tracer.hudfigures import readouts
+
+    out = tmp_path / "r"
+    assert main(["render", "analytic-mirror", "--rays", "300000", "--seed", "2", "--out", str(out), "--quiet"]) == 0
+    proc = subprocess.run([sys.executable, "-m", "tracer.cli", "readouts", str(out)], capture_output=True, text=True,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    rows = readouts(json.loads((out / "report.json").read_text()))
+    lines = proc.stdout.splitlines()
+    assert len(lines) == len(rows) and all(line.split()[0] == label.split()[0] and line.endswith(text)
+                                           for line, (label, text) in zip(lines, rows, strict=True))
+    (tmp_path / "x.json").write_text("{}")
+    bad = subprocess.run([sys.executable, "-m", "tracer.cli", "readouts", str(tmp_path / "x.json")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "not a hud-trace report" in bad.stderr

@@ -1,4 +1,4 @@
-"""Command line: ``hud-trace render | presets | export | methods | false-colour | eyebox``.
+"""Command line: ``hud-trace render | presets | export | methods | readouts | false-colour | eyebox``.
 
 Exit status of ``render`` (each states what is on disk afterwards):
 
@@ -11,6 +11,9 @@ Exit status of ``render`` (each states what is on disk afterwards):
 - 5: aborted by a second interrupt; nothing written, the output folder keeps its earlier outputs.
 - 130: interrupted (Ctrl-C, SIGTERM or SIGHUP): the batches merged so far are written as a set,
   marked ``"partial": true``.
+
+``readouts`` prints the figures of a render's report.json (tracer.hudfigures.readouts, what the Blender
+add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one line).
 
 ``false-colour`` writes the false-colour view of an image.exr (tracer.falsecolour) to one PNG file:
 0 written, 2 bad input (nothing written), 4 the file could not be written (it keeps what it held).
@@ -234,6 +237,29 @@ def cmd_methods(args) -> int:
     return 0
 
 
+def cmd_readouts(args) -> int:
+    import json
+
+    from .hudfigures import readouts
+
+    path = Path(args.report)
+    if path.is_dir():
+        path = path / "report.json"
+    try:
+        report = json.loads(path.read_text(encoding="utf-8"))
+        rows = readouts(report)
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        print(f"error: {path}: cannot be read as a report: {getattr(e, 'strerror', None) or e}", file=sys.stderr)
+        return EXIT_INPUT
+    except (KeyError, TypeError) as e:
+        print(f"error: {path}: not a hud-trace report (no field {e})", file=sys.stderr)
+        return EXIT_INPUT
+    width = max(len(label) for label, _ in rows)
+    for label, text in rows:
+        print(f"{label:<{width}}  {text}")
+    return 0
+
+
 def check_false_colour_args(args):
     """--min and --max finite and positive, --min below --max, --out a .png file."""
     for flag, v in (("--min", args.min), ("--max", args.max)):
@@ -379,6 +405,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_export)
     m = sub.add_parser("methods", help="list the light-transport methods")
     m.set_defaults(func=cmd_methods)
+    o = sub.add_parser("readouts", help="print the HUD figures of a render's report.json")
+    o.add_argument("report", help="a report.json, or the folder of a render")
+    o.set_defaults(func=cmd_readouts)
     f = sub.add_parser("false-colour", help="write the false-colour luminance view of an image.exr")
     f.add_argument("image", help="an image.exr written by `hud-trace render` (its Y channel, or R, G, B)")
     f.add_argument("--out", required=True, help="the PNG file to write")
