@@ -1,8 +1,10 @@
 """Blender data -> the tracer's scene format (tracer/scene.py), and nothing else.
 
-Only objects with an optical role are exported, as evaluated meshes (modifiers applied), with their
-world matrix; Blender's metres (times the scene's unit scale) become millimetres. The active camera
-is the eye; the World's HUD settings are the environment.
+Only objects with an optical role that a render shows are exported, as the depsgraph evaluates them
+(:func:`exported_objects`: at its frame, modifiers applied, every instance an object of its own);
+Blender units (the scene's unit scale) become millimetres. The active camera, as evaluated, is the
+eye; the World's HUD settings are the environment. :func:`blender_terms` turns the tracer's errors
+about an exported folder back into the Blender objects and properties they come from.
 
 An export is written as a set (:func:`export_scene`): first everything that can be checked in Blender
 is checked (camera, images, aim objects) and the scene description is built with nothing written; then

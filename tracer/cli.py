@@ -132,10 +132,31 @@ def _resolve_scene(arg: str, tmp: Path) -> Path:
     raise SceneError(arg, "", f"neither a scene folder nor a preset (presets: {', '.join(PRESETS)})")
 
 
+def _write_errors(e: BaseException, out) -> int:
+    """One line on stderr and the exit status of a command that writes an output set into ``out``, for
+    the errors it ends with: the folder cannot take the set, or a value overflows (2); the writing
+    failed (4: the folder keeps its earlier set); a second Ctrl-C (5); other I/O, such as a preset's
+    temporary scene folder on a full disk (4)."""
+    from .outputs import OutputFolderError, OutputWriteError
+
+    if isinstance(e, OutputFolderError | EstimateOverflowError):
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    if isinstance(e, KeyboardInterrupt):
+        print(f"aborted: nothing written; {out} keeps what it held", file=sys.stderr)
+        return EXIT_ABORTED
+    print(f"error: {e}", file=sys.stderr)
+    return EXIT_WRITE
+
+
+#: What :func:`_write_errors` handles.
+WRITE_ERRORS = (KeyboardInterrupt, OSError, EstimateOverflowError)
+
+
 def cmd_render(args) -> int:
     from .allocator import keep_freed_memory
     from .integrators import Budget
-    from .outputs import OutputFolderError, OutputWriteError
+    from .outputs import OutputError
     from .render import render_scene
     from .scene import load_scene
 
@@ -155,18 +176,8 @@ def cmd_render(args) -> int:
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
                                           should_stop=flag, batch_size=args.batch_size, workers=args.workers,
                                           analyse=not args.no_analysis)
-    except (OutputFolderError, EstimateOverflowError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_INPUT
-    except OutputWriteError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_WRITE
-    except KeyboardInterrupt:
-        print(f"aborted: nothing written; {args.out} keeps what it held", file=sys.stderr)
-        return EXIT_ABORTED
-    except OSError as e:  # I/O outside the output set (a preset's temporary scene folder on a full disk)
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_WRITE
+    except (*WRITE_ERRORS, OutputError) as e:
+        return _write_errors(e, args.out)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
@@ -307,7 +318,7 @@ EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field"
 def cmd_eyebox(args) -> int:
     from .allocator import keep_freed_memory
     from .eyebox import OUTPUT_NAMES, FieldNotFound, ScanArgumentError, check_scan, eyebox_scan, output_files
-    from .outputs import OutputFolderError, OutputSet, OutputWriteError
+    from .outputs import OutputError, OutputSet
     from .scene import load_scene
     from .world import World
 
@@ -331,18 +342,8 @@ def cmd_eyebox(args) -> int:
     except FieldNotFound as e:
         print(f"error: --field: {e}", file=sys.stderr)
         return EXIT_INPUT
-    except (OutputFolderError, EstimateOverflowError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_INPUT
-    except OutputWriteError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_WRITE
-    except KeyboardInterrupt:
-        print(f"aborted: nothing written; {args.out} keeps what it held", file=sys.stderr)
-        return EXIT_ABORTED
-    except OSError as e:  # I/O outside the output set (a preset's temporary scene folder on a full disk)
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_WRITE
+    except (*WRITE_ERRORS, OutputError) as e:
+        return _write_errors(e, args.out)
     finally:
         if bar:
             bar.close()
