@@ -452,21 +452,46 @@ def test_lcd_slide_encoding_follows_the_image_color_space(tmp_path):
         assert msg.startswith("error:") and res["image"] in msg and "ACEScg" in msg
 
 
-def test_readouts_panel_false_colour_and_eyebox_sweep_work_on_hud_direct(tmp_path):
-    """Issue 11, Build item 4, in Blender: after a render of hud-direct the HUD Readouts panel lists the
-    report's figures (symbols, background, contrast, ghost); Show False Colour makes the image "HUD False
-    Colour" (the tracer's false-colour view of the render's Y); a render written to a file gets its
-    false-colour view and report beside it; the Eyebox Sweep operator writes eyebox.csv, .png and .json
-    and finds the command line's eyebox."""
-    res, _ = scenario("readouts", tmp_path)
+@pytest.fixture(scope="module")
+def readouts_run(tmp_path_factory):
+    """hud-direct rendered in Blender into frame.exr, then the HUD Readouts panel drawn, Show False
+    Colour and an Eyebox Sweep (+-90 x +-30 mm, 10 mm): the scenario runs once for the three tests."""
+    out = tmp_path_factory.mktemp("readouts")
+    res, _ = scenario("readouts", out)
+    return res, out
+
+
+def test_readouts_panel_shows_the_reports_figures_on_hud_direct(readouts_run):
+    """Issue 11, Build item 4: after a render of hud-direct the HUD Readouts panel lists the report's
+    figures (symbols, background, contrast, ghost), every row drawn; the report is also written beside
+    the rendered file."""
+    res, out = readouts_run
     rows = dict(res["rows"])
-    report = json.loads((tmp_path / "frame.exr.report.json").read_text())
+    report = json.loads((out / "frame.exr.report.json").read_text())
     assert rows["Symbols"] == f"{report['hud']['symbol_cd_m2']:,.4g} cd/m²"
     assert "Ghost" in rows and "Contrast (Ls + Lb) / Lb" in rows
     assert res["panel_labels"] >= 2 * len(res["rows"])  # the panel drew every row (label and value)
+    assert report["image_file"].endswith("frame.exr")
+
+
+def test_false_colour_view_of_hud_direct_in_blender_and_beside_the_render(readouts_run):
+    """Show False Colour makes the image "HUD False Colour", the tracer's false-colour view of the
+    render's Y; a render written to a file gets it beside it."""
+    res, out = readouts_run
     assert res["false_colour"]["size"] == res["false_colour"]["expected_size"]
-    assert (tmp_path / "frame.exr.falsecolour.png").is_file() and report["image_file"].endswith("frame.exr")
-    assert sorted(p.name for p in (tmp_path / "eyebox").iterdir()) == ["eyebox.csv", "eyebox.json", "eyebox.png"]
-    f = json.loads((tmp_path / "eyebox" / "eyebox.json").read_text())["figures"]
+    from tracer.falsecolour import false_colour
+    from tracer.imageio import read_image
+
+    y = read_multilayer(out / "frame.exr")["ViewLayer.Y.X"].astype(np.float64)
+    got = np.rint(read_image(out / "frame.exr.falsecolour.png", linear=True) * 255).astype(np.uint8)
+    assert np.abs(got.astype(int) - false_colour(y)[0]).max() <= 1
+
+
+def test_eyebox_sweep_operator_finds_the_command_lines_eyebox_on_hud_direct(readouts_run):
+    """The Eyebox Sweep operator writes eyebox.csv, .png and .json and finds the eyebox that
+    `hud-trace eyebox hud-direct --half 90 30 --step 10` finds (README: 120 x 40 mm between grid points)."""
+    res, out = readouts_run
+    assert sorted(p.name for p in (out / "eyebox").iterdir()) == ["eyebox.csv", "eyebox.json", "eyebox.png"]
+    f = json.loads((out / "eyebox" / "eyebox.json").read_text())["figures"]
     assert f["grid_width_mm"] == pytest.approx(120.0) and f["grid_height_mm"] == pytest.approx(40.0)
     assert res["eyebox_image"] is True
