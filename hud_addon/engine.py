@@ -109,8 +109,9 @@ def render_final(engine, depsgraph) -> dict:
 
         t0 = time.perf_counter()
         try:
-            result = run_render(integrator, budget, worker_count(scene), progress, engine.test_break, preview)
-            products = render_products(world, integrator, result, budget)
+            integrator, result = run_render(integrator, budget, worker_count(scene), progress, engine.test_break,
+                                            preview)
+            products = render_products(integrator.world, integrator, result, budget)
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
             return _fail(engine, str(e))

@@ -12,6 +12,7 @@ seeds give the same image as one process. Dask is optional: ``pip install "dask[
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import tempfile
@@ -22,7 +23,9 @@ from pathlib import Path
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
 from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
-from .scene import load_scene
+from .eye import ThinLensEye
+from .scene import EyeSpec, load_scene
+from .world import World
 
 _UNPACKED: dict[str, str] = {}
 
@@ -38,16 +41,18 @@ def pack_scene(folder) -> bytes:
     return buf.getvalue()
 
 
-def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_size: int, index: int):
+def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_size: int, options: dict, eye,
+                     index: int):
     """Runs on a Dask worker: unpack the scene once, keep one integrator per render, trace a batch."""
-    key = (digest, method, seed, batch_size)
+    key = (digest, method, seed, batch_size, repr(options), repr(eye))
     if _WORKER.get("key") != key:
         if digest not in _UNPACKED:
             folder = Path(tempfile.mkdtemp(prefix="hud-dask-"))
             with zipfile.ZipFile(io.BytesIO(blob)) as z:
                 z.extractall(folder)
             _UNPACKED[digest] = str(folder)
-        _WORKER["integrator"] = INTEGRATORS[method](load_scene(_UNPACKED[digest]), seed, batch_size)
+        world = World(load_scene(_UNPACKED[digest]), ThinLensEye(EyeSpec(**eye)))
+        _WORKER["integrator"] = INTEGRATORS[method](world, seed, batch_size, options)
         _WORKER["key"] = key
     return _run_batch(index)
 
@@ -79,12 +84,13 @@ def render_dask(local, budget: Budget, client, in_flight: int | None = None, pro
                 should_stop=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
     started = time.perf_counter()  # a time budget counts the pilot and the upload of the scene
-    local.fit_batch(budget)  # before the batch size travels to the workers
+    budget = local.prepare(budget)  # before the batch size and the options travel to the workers
     blob = pack_scene(local.scene.root)
     digest = hashlib.sha256(blob).hexdigest()
     [blob_future] = client.scatter([blob], broadcast=True)
     workers = max(1, len(client.scheduler_info().get("workers", {})))
-    args = (blob_future, digest, local.name, local.seed, local.batch_size)
+    args = (blob_future, digest, local.name, local.seed, local.batch_size, local.worker_options(),
+            dataclasses.asdict(local.eye.spec))
 
     def submit(k):
         return client.submit(_batch_on_worker, *args, k, pure=False,

@@ -18,6 +18,10 @@ image itself.
 
 Sums merge exactly: a film from another process adds to this one term by term (tracer.parallel adds
 batches in batch order, so the same batches give the same image bit for bit).
+
+Groups. Components traced independently of each other (the hybrid method's channels: each its own
+method, its own random streams, its own replicates) form groups; each group keeps its own replicate
+sums, and the image's variance is the sum of the groups' variances (independent estimates add).
 """
 
 from __future__ import annotations
@@ -27,6 +31,39 @@ import numpy as np
 from .units import luminance3
 
 
+class _Replicates:
+    """The replicate sums of one group of components: per pixel the sums over replicates of Y(m_r) and
+    of its square, the sums of the replicates' image means and of their squares, and their count."""
+
+    def __init__(self, n: int):
+        self.sum = np.zeros(n)
+        self.sq = np.zeros(n)
+        self.mean_sum = 0.0
+        self.mean_sq = 0.0
+        self.count = 0
+
+    def add(self, images: np.ndarray | None, replicates: int):
+        """Add the (R, pixels) replicate images of one batch (None: nothing landed)."""
+        if images is not None:
+            self.sum += images.sum(axis=0)
+            self.sq += (images * images).sum(axis=0)
+            means = images.mean(axis=1)
+            self.mean_sum += float(means.sum())
+            self.mean_sq += float((means * means).sum())
+        self.count += replicates
+
+    def arrays(self) -> tuple:
+        return self.sum, self.sq, self.mean_sum, self.mean_sq, self.count
+
+    def merge(self, data: tuple):
+        s, sq, mean_sum, mean_sq, count = data
+        self.sum += s
+        self.sq += sq
+        self.mean_sum += mean_sum
+        self.mean_sq += mean_sq
+        self.count += count
+
+
 class Film:
     """Sums of one or more batches.
 
@@ -34,35 +71,53 @@ class Film:
     ----------
     width, height : retina pixels.
     components : {name: normaliser kind} ("samples per pixel" or "particles", free text for the report).
+    groups : {component: group}: components whose replicates are independent of the others' (the
+        channels of the hybrid method, each traced by its own method on its own random streams) form
+        groups; each group keeps its own replicate sums, and the variances of independent groups add.
+        By default every component is in one group "".
     """
 
-    def __init__(self, width: int, height: int, components: dict[str, str]):
+    def __init__(self, width: int, height: int, components: dict[str, str], groups: dict[str, str] | None = None):
         self.width, self.height = width, height
         n = width * height
         self.kinds = dict(components)
+        self.group_of = {name: (groups or {}).get(name, "") for name in components}
+        self.groups = {g: _Replicates(n) for g in dict.fromkeys(self.group_of.values())}
         self.sums = {name: np.zeros((3, n)) for name in components}  # RGB, (3, pixels)
         self.norm = dict.fromkeys(components, 0)  # the normaliser's total
-        self.rep_sum = np.zeros(n)  # sum over replicates of Y(m_r)
-        self.rep_sq = np.zeros(n)  # sum over replicates of Y(m_r)^2
         self.comp_rep_sum = {name: np.zeros(n) for name in components}  # per component, for its own error
         self.comp_rep_sq = {name: np.zeros(n) for name in components}
-        #: Sums over replicates of each replicate's image mean of Y, and of its square: the mean's own
-        #: error, honest where an estimator correlates neighbouring pixels (a photon gather's disk
-        #: spans several of them).
-        self.mean_rep_sum = 0.0
-        self.mean_rep_sq = 0.0
-        self.replicates = 0
 
     @property
     def pixels(self) -> int:
         return self.width * self.height
 
+    @property
+    def replicates(self) -> int:
+        """Replicates recorded, over every group."""
+        return sum(g.count for g in self.groups.values())
+
+    @property
+    def rep_sum(self) -> np.ndarray:
+        """Per pixel, the sums over replicates of Y(m_r), over every group."""
+        return sum((g.sum for g in self.groups.values()), start=np.zeros(self.pixels)) if len(self.groups) > 1 \
+            else next(iter(self.groups.values())).sum
+
+    @property
+    def rep_sq(self) -> np.ndarray:
+        """Per pixel, the sums over replicates of Y(m_r)^2, over every group."""
+        return sum((g.sq for g in self.groups.values()), start=np.zeros(self.pixels)) if len(self.groups) > 1 \
+            else next(iter(self.groups.values())).sq
+
     # -- filling (one batch) ---------------------------------------------------------------------
-    def record_batch(self, splats: Splats, replicates: int, normalisers: dict[str, int]):
-        """Add one batch: its ``splats``, made of ``replicates`` replicates, with the batch's
-        normaliser total of each component (every replicate has an equal share of it)."""
+    def record_batch(self, splats: Splats, replicates: int, normalisers: dict[str, int], group: str = ""):
+        """Add one batch of the components of ``group``: its ``splats``, made of ``replicates``
+        replicates, with the batch's normaliser total of each component (every replicate has an equal
+        share of it)."""
         total = None
         for name in self.kinds:
+            if self.group_of[name] != group:
+                continue
             pixels, rep, values = splats.gather(name)
             norm = normalisers.get(name, 0)
             if len(pixels):
@@ -74,34 +129,29 @@ class Film:
             self.comp_rep_sq[name] += (images * images).sum(axis=0)
             total = images if total is None else total + images
             self.norm[name] += int(norm)
-        if total is not None:
-            self.rep_sum += total.sum(axis=0)
-            self.rep_sq += (total * total).sum(axis=0)
-            means = total.mean(axis=1)
-            self.mean_rep_sum += float(means.sum())
-            self.mean_rep_sq += float((means * means).sum())
-        self.replicates += replicates
+        self.groups[group].add(total, replicates)
 
     # -- merging ---------------------------------------------------------------------------------
     def arrays(self) -> tuple:
         """Everything a batch contributes, as plain arrays and numbers (what workers send back)."""
         names = list(self.kinds)
-        return (names, [self.sums[k] for k in names], [self.norm[k] for k in names], self.rep_sum, self.rep_sq,
-                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names], self.replicates,
-                self.mean_rep_sum, self.mean_rep_sq)
+        return (names, [self.sums[k] for k in names], [self.norm[k] for k in names],
+                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names],
+                {g: r.arrays() for g, r in self.groups.items()})
 
-    def merge_arrays(self, data: tuple):
-        names, sums, norms, rep_sum, rep_sq, c_sum, c_sq, replicates, mean_sum, mean_sq = data
-        self.mean_rep_sum += mean_sum
-        self.mean_rep_sq += mean_sq
+    def merge_arrays(self, data: tuple, prefix: str = "", group: str | None = None):
+        """Add another film's :meth:`arrays`; with ``prefix``, its components are this film's
+        ``prefix + name``, and with ``group`` its replicate sums go to that group of this film (the
+        hybrid method merges each channel's own film so)."""
+        names, sums, norms, c_sum, c_sq, groups = data
         for i, k in enumerate(names):
+            k = prefix + k
             self.sums[k] += sums[i]
             self.norm[k] += norms[i]
             self.comp_rep_sum[k] += c_sum[i]
             self.comp_rep_sq[k] += c_sq[i]
-        self.rep_sum += rep_sum
-        self.rep_sq += rep_sq
-        self.replicates += replicates
+        for g, rep in groups.items():
+            self.groups[g if group is None else group].merge(rep)
 
     def merge(self, other: Film):
         self.merge_arrays(other.arrays())
@@ -112,37 +162,45 @@ class Film:
         s = self.sums[name] / max(self.norm[name], 1)
         return np.ascontiguousarray(s.T).reshape(self.height, self.width, 3)
 
-    def rgb(self) -> np.ndarray:
-        """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components."""
+    def rgb(self, group: str | None = None) -> np.ndarray:
+        """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
+        ``group`` only, when given)."""
         out = np.zeros((self.height, self.width, 3))
         for name in self.kinds:
-            out += self.component_rgb(name)
+            if group is None or self.group_of[name] == group:
+                out += self.component_rgb(name)
         return out
 
-    def _variance(self, s: np.ndarray, sq: np.ndarray) -> np.ndarray:
-        r = self.replicates
+    def _variance(self, s: np.ndarray, sq: np.ndarray, r: int) -> np.ndarray:
         if r < 2:
             return np.zeros((self.height, self.width))
         mean = s / r
         var = np.maximum(sq / r - mean * mean, 0.0) * r / (r - 1)
         return (var / r).reshape(self.height, self.width)
 
-    def variance_y(self) -> np.ndarray:
+    def variance_y(self, group: str | None = None) -> np.ndarray:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
-        (zeros before two replicates exist)."""
-        return self._variance(self.rep_sum, self.rep_sq)
+        (zeros before two replicates exist): the sum over the independent groups (of ``group`` only,
+        when given)."""
+        out = np.zeros((self.height, self.width))
+        for g, rep in self.groups.items():
+            if group is None or g == group:
+                out = out + self._variance(rep.sum, rep.sq, rep.count)
+        return out
 
-    def mean_standard_error(self) -> float:
+    def mean_standard_error(self, group: str | None = None) -> float:
         """Standard error (cd/m^2) of the image's mean luminance, from the spread of the replicates'
-        image means (0 before two replicates exist)."""
-        r = self.replicates
-        if r < 2:
-            return 0.0
-        mean = self.mean_rep_sum / r
-        return float(np.sqrt(max(self.mean_rep_sq / r - mean * mean, 0.0) / (r - 1)))
+        image means (0 before two replicates exist); the groups' variances add."""
+        var = 0.0
+        for g, rep in self.groups.items():
+            r = rep.count
+            if r >= 2 and (group is None or g == group):
+                mean = rep.mean_sum / r
+                var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
+        return float(np.sqrt(var))
 
     def component_variance_y(self, name: str) -> np.ndarray:
-        return self._variance(self.comp_rep_sum[name], self.comp_rep_sq[name])
+        return self._variance(self.comp_rep_sum[name], self.comp_rep_sq[name], self.groups[self.group_of[name]].count)
 
 
 class Splats:

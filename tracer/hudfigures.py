@@ -21,6 +21,19 @@ is judged on one table.
   normalised box filter over background pixels only): its peak (cd/m^2), the peak over the
   background's median, and its size: the solid angle where the smoothed background exceeds half its
   peak, as the diameter (deg) of a disk of equal solid angle.
+
+Against a real environment (the hybrid method's channels: the HUD's light and the environment's, each
+an image of its own), symbols and background are told apart on the HUD channel, and the environment
+channel gives what lies behind them:
+
+- ``environment_behind_symbols_cd_m2``: the environment's luminance over the symbol pixels (seen through
+  the windshield and the combiner);
+- ``background_behind_symbols_cd_m2`` = that + the HUD's own background (its black leak), and
+  ``contrast_ratio`` = (L_sym + L_b) / L_b with that L_b: the symbols' contrast against what the eye
+  sees behind them (``hud_contrast_ratio``: the HUD alone, as in the dark);
+- ``spot.environment_cd_m2``: the environment smoothed as the spot, at the spot's peak, and
+  ``spot.contrast_against_environment`` = (L_env + L_spot) / L_env: how the HUD's brightest background
+  region stands out against the environment behind it (1: invisible).
 """
 
 from __future__ import annotations
@@ -110,9 +123,10 @@ def display_mask(world) -> np.ndarray | None:
     return out
 
 
-def hud_figures(world, y: np.ndarray) -> dict | None:
-    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye; None
-    where the eye sees no display."""
+def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> dict | None:
+    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye (with
+    ``environment``, ``y`` is the HUD channel alone and ``environment`` the environment channel's image);
+    None where the eye sees no display."""
     mask = display_mask(world)
     if mask is None or mask.sum() < 16:
         return None
@@ -150,6 +164,12 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
     out |= {"symbol_threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
             "symbol_cd_m2": l_sym, "background_cd_m2": l_bg,
             "contrast_ratio": (l_sym + l_bg) / l_bg if l_bg > 0 else None}
+    if environment is not None:
+        behind = float(environment[sym_in].mean()) if sym_in.any() else float(environment[sym].mean())
+        l_b = behind + l_bg
+        out |= {"environment_behind_symbols_cd_m2": behind, "background_behind_symbols_cd_m2": l_b,
+                "hud_contrast_ratio": out["contrast_ratio"],
+                "contrast_ratio": (l_sym + l_b) / l_b if l_b > 0 else None}
     if bg_in.sum() >= 16 and l_bg > 0:
         bg = bg_in
         cols = np.flatnonzero(mask.any(axis=0))
@@ -166,6 +186,10 @@ def hud_figures(world, y: np.ndarray) -> dict | None:
                        "peak_over_median_background": peak / median if median > 0 else None,
                        "peak_over_symbol": peak / l_sym if l_sym > 0 else None,
                        "half_peak_diameter_deg": diameter, "smoothing_px": 2 * k + 1}
+        if environment is not None:
+            env = float(_box_mean(np.where(bg, environment, 0.0), bg.astype(np.float64), k)[at])
+            out["spot"] |= {"environment_cd_m2": env,
+                            "contrast_against_environment": (env + peak) / env if env > 0 else None}
     return out
 
 
@@ -180,7 +204,11 @@ def readouts(report: dict) -> list[tuple[str, str]]:
     if "symbol_cd_m2" in hud:
         rows.append(("Symbols", f"{hud['symbol_cd_m2']:,.4g} cd/m²"))
         rows.append(("Background", f"{hud['background_cd_m2']:,.4g} cd/m²"))
-        rows.append(("Contrast (Ls + Lb) / Lb", f"{hud['contrast_ratio']:,.4g} : 1"))
+        if "environment_behind_symbols_cd_m2" in hud:
+            rows.append(("Behind the symbols", f"{hud['background_behind_symbols_cd_m2']:,.4g} cd/m² (environment "
+                                               f"{hud['environment_behind_symbols_cd_m2']:,.4g})"))
+        if hud["contrast_ratio"] is not None:
+            rows.append(("Contrast (Ls + Lb) / Lb", f"{hud['contrast_ratio']:,.4g} : 1"))
     elif "display_cd_m2" in hud:
         rows.append(("Display", f"{hud['display_cd_m2']:,.4g} cd/m² ({hud.get('note', '')})"))
     elif hud.get("note"):
@@ -189,6 +217,9 @@ def readouts(report: dict) -> list[tuple[str, str]]:
     if spot:
         rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {spot['peak_over_median_background']:.3g} x the "
                              f"background, {spot['half_peak_diameter_deg']:.2g} deg"))
+        if spot.get("contrast_against_environment") is not None:
+            rows.append(("Spot against the environment", f"{spot['contrast_against_environment']:.4g} : 1 (environment "
+                                                         f"{spot['environment_cd_m2']:,.4g} cd/m²)"))
     ghost = (report.get("brightness_theorem") or {}).get("ghost")
     if ghost and ghost.get("ratio_to_symbol") is not None:
         dx, dy = ghost["offset_px"]
@@ -196,7 +227,11 @@ def readouts(report: dict) -> list[tuple[str, str]]:
                               f"({dx:+d}, {dy:+d} px)"))
     lum = report["luminance"]
     rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
-    rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² (log-average)"))
+    mode = report.get("adaptation_mode", "log_average").replace("_", "-")
+    rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² ({mode})"))
+    for name, ch in (report.get("method_details") or {}).get("channels", {}).items():
+        rows.append((f"Channel {name}", f"{ch['method']} ({ch['chosen_by']}), {ch['mean_cd_m2']:,.4g} cd/m² mean"
+                     if ch.get("method") else f"skipped: {ch['skipped']}"))
     noise = report["noise"]["median_relative_standard_error_lit_pixels"]
     if noise is not None:
         rows.append(("Noise", f"{100 * noise:.3g} % per lit pixel (median standard error)"))

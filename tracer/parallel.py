@@ -26,6 +26,7 @@ hidden from the workers: they need only the tracer.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib.machinery
 import multiprocessing as mp
 import os
@@ -41,7 +42,9 @@ import numpy as np
 from .allocator import keep_freed_memory
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
-from .scene import load_scene
+from .eye import ThinLensEye
+from .scene import EyeSpec, load_scene
+from .world import World
 
 _WORKER: dict = {}
 #: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
@@ -71,7 +74,11 @@ def _await_workers(pool, ready, workers: int):
         started += 1
 
 
-def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, ready):
+def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, ready):
+    """A worker's start: its own world (the scene folder's, seen by the parent's eye ``eye``, the fields
+    of an EyeSpec: a pupil that follows the image was chosen there), the integrator of ``method`` with
+    the parent's ``options`` (what its prepare decided), and the roulette's pilot. Arguments are plain
+    data: inside Blender nothing of the tracer can be unpickled before tracer/worker_bootstrap.py ran."""
     # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP reaches the whole process group,
     # and a worker must not die of it mid-batch with a traceback. SIGTERM keeps its default (a quiet
     # exit): the pool ends its workers with it.
@@ -80,7 +87,8 @@ def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, ready)
             signal.signal(getattr(signal, name), signal.SIG_IGN)
     keep_freed_memory()  # a worker process exists to trace
     try:
-        integrator = INTEGRATORS[method](load_scene(scene_dir), seed, batch_size)
+        scene = load_scene(scene_dir)
+        integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
         integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
     except Exception as e:  # noqa: BLE001 - told to the parent, which stops the pool (a raise would respawn us)
         ready.put(f"{type(e).__name__}: {e}")
@@ -193,7 +201,7 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     folder, method, seed and batch size; see the module docstring). Raises RuntimeError when no
     Python interpreter for the workers is found (:func:`python_executable`)."""
     started = time.perf_counter()  # a time budget counts the pilot and the workers' start-up
-    local.fit_batch(budget)  # before the workers take the batch size
+    budget = local.prepare(budget)  # before the workers take the batch size and the options
     executable = python_executable()
     if executable is None:
         raise RuntimeError(f"no Python interpreter to run worker processes (sys.executable is {sys.executable})")
@@ -201,7 +209,7 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     ctx.set_executable(executable)
     ready = ctx.Queue()
     initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
-                                          ready))
+                                          local.worker_options(), dataclasses.asdict(local.eye.spec), ready))
     t0 = time.perf_counter()
     with _main_hidden():
         pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import dataclasses
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ from .imageio import read_exr_channels, read_image, write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .outputs import OutputFile, OutputSet
 from .parallel import render_parallel
+from .pupil import pupil_diameter_mm
 from .scene import Scene, load_scene
 from .tonemap import log_average_luminance, tonemap_ward
 from .units import luminance
@@ -232,11 +234,15 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     return out
 
 
-def adaptation_luminance(y: np.ndarray) -> float:
-    """The luminance (cd/m^2) the eye adapts to: the log-average (Ward 1994) over the pixels that
-    receive light. Pixels that receive none (no environment, nothing in view) are left out: an eye
-    looking at a HUD in the dark adapts to what it sees, not to an infinitely dark void."""
+def adaptation_luminance(y: np.ndarray, mode: str = "log_average") -> float:
+    """The luminance (cd/m^2) the eye adapts to, over the pixels that receive light: their log-average
+    (``mode`` "log_average", Ward 1994 and Reinhard et al. 2002, eq. 1) or their arithmetic mean
+    ("mean", the "average luminance" of the paper, sec. 4.1). Pixels that receive none (no environment,
+    nothing in view) are left out: an eye looking at a HUD in the dark adapts to what it sees, not to
+    an infinitely dark void. The log-average weighs a bright sun or HUD symbol less than the mean."""
     lit = y > 1e-9 * max(float(y.max()), 1e-300)
+    if mode == "mean":
+        return float(y[lit].mean()) if lit.any() else 0.0
     return log_average_luminance(y[lit]) if lit.any() else log_average_luminance(y)
 
 
@@ -290,6 +296,7 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "replicates": result.film.replicates,
         "stage_seconds": result.stages,
         "adaptation_luminance": preview_info["adaptation_luminance"],
+        "adaptation_mode": preview_info.get("adaptation_mode", "log_average"),
         "noise": {"median_relative_standard_error_lit_pixels": median_err},
         "preview": preview_info,
         "image": {"width": image.shape[1], "height": image.shape[0],
@@ -360,19 +367,57 @@ def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarr
             OutputFile("report.json", lambda p: Path(p).write_text(report_text), check_report)]
 
 
+#: Share of the budget of the pilot render that finds the adaptation luminance a pupil follows.
+PUPIL_PILOT_SHARE = 0.05
+
+
+def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
+    """For an eye whose pupil follows the image (EyeSpec.pupil_from_image): a pilot render of a share
+    of the budget (backward tracing of every source: the adaptation luminance is a mean over the image,
+    which it finds fast in every scene) gives the adaptation luminance, Watson & Yellott's formula the
+    pupil (pupil.py); the integrator is rebuilt for that eye and the budget left is returned with what
+    the pilot found. (Apparent luminance hardly depends on the pupil, so one pilot is enough.)"""
+    spec = integrator.eye.spec
+    share = Budget(rays=None if budget.rays is None else max(1, int(PUPIL_PILOT_SHARE * budget.rays)),
+                   seconds=None if budget.seconds is None else PUPIL_PILOT_SHARE * budget.seconds)
+    t0 = time.perf_counter()
+    pilot = INTEGRATORS["backward"](integrator.world, integrator.seed + 1)
+    first = pilot.render(share, None, should_stop)
+    adapt = adaptation_luminance(luminance(first.film.rgb()), spec.adaptation)
+    pupil = pupil_diameter_mm(adapt, age_years=spec.observer_age)
+    eye = dataclasses.replace(spec, pupil_diameter_mm=pupil)
+    world = integrator.world.with_eye(eye)
+    rebuilt = type(integrator)(world, integrator.seed, None if integrator.auto_batch else integrator.batch_size,
+                               integrator.opts)
+    left = Budget(rays=None if budget.rays is None else max(1, budget.rays - first.rays),
+                  seconds=None if budget.seconds is None else max(1e-3, budget.seconds - (time.perf_counter() - t0)))
+    found = {"pilot_rays": first.rays, "pilot_seconds": first.seconds, "adaptation_mode": spec.adaptation,
+             "pilot_adaptation_luminance_cd_m2": adapt, "pupil_diameter_mm": pupil,
+             "first_guess_pupil_diameter_mm": spec.pupil_diameter_mm,
+             "formula": "Watson & Yellott 2012, doi:10.1167/12.10.12 (60 deg field, both eyes)"}
+    return rebuilt, left, found
+
+
 def run_render(integrator, budget: Budget, workers: int = 1, progress=None, should_stop=None,
-               preview=None) -> RenderResult:
+               preview=None) -> tuple[object, RenderResult]:
     """Run ``integrator`` for ``budget`` on ``workers`` processes (tracer.parallel) or in this one:
     the command line's render and Blender's, with the two callables of the seam (``progress``,
-    ``should_stop``) and the optional ``preview(film)`` (tracer.integrators.base.drive). Raises
-    FloatingPointError if the estimate holds NaN or Inf (a bug: the estimators never make them)."""
+    ``should_stop``) and the optional ``preview(film)`` (tracer.integrators.base.drive). Where the eye's
+    pupil follows the image, a pilot finds it first (:func:`_follow_pupil`). Returns the integrator that
+    rendered (rebuilt for that pupil) and the result. Raises FloatingPointError if the estimate holds
+    NaN or Inf (a bug: the estimators never make them)."""
+    pupil = None
+    if integrator.eye.spec.pupil_from_image:
+        integrator, budget, pupil = _follow_pupil(integrator, budget, workers, should_stop)
     if workers > 1:
         result = render_parallel(integrator, budget, workers, progress, should_stop, preview)
     else:
         result = integrator.render(budget, progress, should_stop, preview)
+    if pupil is not None:
+        result.extra["pupil"] = pupil
     if not (np.all(np.isfinite(result.film.rgb())) and np.all(np.isfinite(result.film.variance_y()))):
         raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
-    return result
+    return integrator, result
 
 
 @dataclass
@@ -397,18 +442,26 @@ class Products:
 def render_products(world: World, integrator, result: RenderResult, budget: Budget, analyse: bool = True) -> Products:
     """The image, report and EXR contents of a finished render (see :class:`Products`). The
     brightness-theorem analysis and the HUD figures run unless ``analyse`` is false or the render was
-    stopped early (``result.partial``: a stop must end promptly); their time is not part of the budget."""
+    stopped early (``result.partial``: a stop must end promptly); their time is not part of the budget.
+    An image made of channels (the hybrid method: film groups) also gets each channel as EXR layer
+    ``<channel>.R, .G, .B, .Y, .Y_var``, and its HUD figures read the symbols off the HUD channel and
+    the background behind them off the environment channel."""
     scene = world.scene
-    image = result.film.rgb()
-    var_y = result.film.variance_y()
+    film = result.film
+    image = film.rgb()
+    var_y = film.variance_y()
     y = luminance(image)
-    preview, info = tonemap_ward(image, adaptation_luminance(y))
+    mode = world.eye.spec.adaptation
+    preview, info = tonemap_ward(image, adaptation_luminance(y, mode))
+    info["adaptation_mode"] = mode
+    channels_y = {g: luminance(film.rgb(g)) for g in film.groups if g}
     analysis = figures = None
     if analyse and world.accel is not None and not result.partial:
         t0 = time.perf_counter()
-        analysis = brightness_theorem(world, y, var_y, type(integrator).renders_environment)
+        analysis = brightness_theorem(world, y, var_y, integrator.renders_environment)
         analysis["seconds"] = time.perf_counter() - t0
-        figures = hud_figures(world, y)
+        figures = hud_figures(world, channels_y["hud"], channels_y.get("environment")) if "hud" in channels_y \
+            else hud_figures(world, y)
     report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
     report["hud"] = figures
     run_id = uuid.uuid4().hex
@@ -418,8 +471,14 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
              "hud:seed": str(result.seed), "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
              "hud:run_id": run_id,
              "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
-                          "Y_var: (cd/m^2)^2"}
+                          "Y_var: (cd/m^2)^2" + ("; <channel>.R,G,B,Y,Y_var: the same for each channel"
+                                                 if channels_y else "")}
     channels = {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y}
+    for g in channels_y:
+        rgb = film.rgb(g)
+        channels |= {f"{g}.R": rgb[..., 0], f"{g}.G": rgb[..., 1], f"{g}.B": rgb[..., 2], f"{g}.Y": channels_y[g],
+                     f"{g}.Y_var": film.variance_y(g)}
+    report["image"]["channels"] = list(channels)
     return Products(image, y, var_y, preview, report, channels, attrs)
 
 
@@ -441,8 +500,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     try:
         world = World(scene)
         integrator = INTEGRATORS[method](world, seed, batch_size)
-        result = run_render(integrator, budget, workers, progress, should_stop)
-        products = render_products(world, integrator, result, budget, analyse)
+        integrator, result = run_render(integrator, budget, workers, progress, should_stop)
+        products = render_products(integrator.world, integrator, result, budget, analyse)
         outputs.commit(products.files())
         outputs.keep()
     finally:

@@ -15,7 +15,9 @@ scene.json, version 1::
       "format": "hud-scene", "version": 1, "name": "...", "description": "...",
       "eye": {"position": [x, y, z], "gaze": [..], "up": [..],
               "pupil_diameter_mm": 4.0,           # or "auto": Watson & Yellott 2012 from
-              "adaptation_luminance_cd_m2": 300,  # this (default: the environment's mean luminance)
+              "adaptation_luminance_cd_m2": 300,  # this, or "image": what the eye sees (a pilot render
+                                                  # finds it); default: the environment's mean luminance
+              "adaptation": "log_average",        # or "mean": how the image gives the adaptation luminance
               "observer_age": 30, "focal_length_mm": 16.67,
               "accommodation_distance_mm": 2500.0,           # or "infinity"
               "resolution": [W, H], "fov_deg": [horizontal, vertical]},
@@ -158,6 +160,12 @@ class SceneObject:
         return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
 
 
+#: How the adaptation luminance follows from an image (EyeSpec.adaptation).
+ADAPTATION_MODES = ("log_average", "mean")
+#: The pupil's first guess when it follows the image and the environment is black: a lit interior, cd/m^2.
+FIRST_GUESS_CD_M2 = 100.0
+
+
 @dataclass
 class EyeSpec:
     """The observer: a thin-lens eye (see :mod:`tracer.eye`). Lengths in mm, angles in degrees."""
@@ -170,6 +178,13 @@ class EyeSpec:
     accommodation_distance_mm: float
     resolution: tuple[int, int]
     fov_deg: tuple[float, float]
+    #: How the adaptation luminance follows from the image the eye sees: "log_average" (Ward 1994's
+    #: log-average, the default) or "mean" (the arithmetic mean; the paper's "average luminance").
+    adaptation: str = "log_average"
+    #: The pupil follows the image's adaptation luminance (Watson & Yellott 2012; "auto" with
+    #: adaptation_luminance_cd_m2 "image"): a pilot render finds it (tracer.render.run_render).
+    pupil_from_image: bool = False
+    observer_age: float = 30.0
 
 
 @dataclass
@@ -393,22 +408,32 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
-            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age"})
+            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age", "adaptation"})
     pos = ck.position(spec["position"], "eye.position")
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")
     if np.linalg.norm(np.cross(gaze, up)) < 1e-6:
         ck.fail("eye.up", "must not be parallel to eye.gaze")
+    adaptation = spec.get("adaptation", "log_average")
+    if adaptation not in ADAPTATION_MODES:
+        ck.fail("eye.adaptation", f"expected one of {', '.join(json.dumps(m) for m in ADAPTATION_MODES)}, got "
+                                  f"{json.dumps(adaptation)[:40]}")
+    age = ck.number(spec.get("observer_age", 30.0), "eye.observer_age", min_value=1.0, max_value=120.0)
+    from_image = False
     if spec["pupil_diameter_mm"] == "auto":
-        # Watson & Yellott (2012) for the adaptation luminance: given, or the environment's mean.
-        if "adaptation_luminance_cd_m2" in spec:
-            adapt = ck.number(spec["adaptation_luminance_cd_m2"], "eye.adaptation_luminance_cd_m2", min_value=0.0,
-                              max_value=MAX_LUMINANCE)
+        # Watson & Yellott (2012) for the adaptation luminance: given, the image's (a pilot finds it), or
+        # the environment's mean.
+        given = spec.get("adaptation_luminance_cd_m2")
+        if given == "image":
+            from_image = True
+            adapt = environment.mean_luminance if not environment.is_black else FIRST_GUESS_CD_M2
+        elif given is not None:
+            adapt = ck.number(given, "eye.adaptation_luminance_cd_m2", min_value=0.0, max_value=MAX_LUMINANCE)
         elif not environment.is_black:
             adapt = environment.mean_luminance
         else:
-            ck.fail("eye.pupil_diameter_mm", '"auto" needs eye.adaptation_luminance_cd_m2 or a lit environment')
-        age = ck.number(spec.get("observer_age", 30.0), "eye.observer_age", min_value=1.0, max_value=120.0)
+            ck.fail("eye.pupil_diameter_mm", '"auto" needs eye.adaptation_luminance_cd_m2 (a luminance, or "image") '
+                                             'or a lit environment')
         pupil = pupil_diameter_mm(adapt, age_years=age)
     else:
         pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True,
@@ -436,7 +461,8 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
     if np.any(fov <= 0) or np.any(fov >= 170):
         ck.fail("eye.fov_deg", "each field angle must lie in (0, 170) degrees")
-    return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])))
+    return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])), adaptation,
+                   from_image, age)
 
 
 def _methods(ck: FieldChecker, raw: dict, scene: Scene) -> dict[str, dict]:

@@ -15,6 +15,7 @@ import numpy as np
 
 from .accel import Accelerator
 from .apertures import DiskTarget, MeshTarget
+from .environment import NoEnvironment
 from .eye import ThinLensEye
 from .lights import LightTable
 from .optics.aimed import Aimed
@@ -64,6 +65,20 @@ class World:
         other = copy.copy(self)
         other.eye = ThinLensEye(spec)
         other._targets = {k: v for k, v in self._targets.items() if k != "eye"}
+        return other
+
+    def channel(self, lights: bool = True, environment: bool = True) -> World:
+        """This world with only some of its sources: without its emitters (``lights`` false: every object
+        is still traced, the emitting ones as their materials only) or without its environment (black).
+        The hybrid method renders each channel of an image on such a world (tracer.integrators.hybrid);
+        the geometry, materials and aim targets are shared."""
+        other = copy.copy(self)
+        if not lights:
+            other.lights = LightTable([])
+            if self.accel is not None:
+                other.lights.link_faces(self.accel.faces, self.accel.first_face)
+        if not environment:
+            other.environment = NoEnvironment()
         return other
 
     def target(self, name: str):

@@ -5,7 +5,7 @@ command line and the Blender add-on without changes there.
 """
 
 from ..film import Film
-from . import backward, forward, photon  # noqa: F401  (registration)
+from . import backward, forward, hybrid, photon  # noqa: F401  (registration)
 from .base import DEFAULT_BATCH, INTEGRATORS, Budget, Integrator, RenderResult
 
 #: The method used when none is named: backward tracing with next-event estimation, the most

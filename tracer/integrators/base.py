@@ -183,7 +183,7 @@ class Integrator:
         self.batch_size = DEFAULT_BATCH if batch_size is None else int(batch_size)
         self.pilot_seconds = 0.0
         self.opts = options if options is not None else self.scene.method_options(self.name)
-        self.max_depth = self.opts["max_depth"]
+        self.max_depth = self.opts.get("max_depth", MAX_DEPTH.default)  # methods of methods have none
         self.warnings: list[str] = []
         self.truncated = 0
         self._reference = None
@@ -232,6 +232,23 @@ class Integrator:
             self.pilot_rays = self.world.rays_traced - rays0
         return self._reference
 
+    def new_film(self) -> Film:
+        """An empty film for this method's components (a batch's, or the render's)."""
+        return Film(self.eye.width, self.eye.height, self.components)
+
+    def prepare(self, budget: Budget) -> Budget:
+        """Everything a render decides once, before its first batch, in the process that drives it
+        (never in a worker): the batch size for a time budget (:meth:`fit_batch`); a method that runs
+        pilots to choose (tracer.integrators.auto) does so here. Returns the budget the batches may
+        spend (what its pilots already spent taken off)."""
+        self.fit_batch(budget)
+        return budget
+
+    def worker_options(self) -> dict:
+        """The options with which a worker process builds an integrator that traces this render's very
+        batches (after :meth:`prepare`: what it decided is in them)."""
+        return self.opts
+
     def fit_batch(self, budget: Budget):
         """With a budget in seconds and no batch size given, size batches from the pilot's pace (paths
         per second, without roulette: an underestimate) so that one takes at most
@@ -254,7 +271,7 @@ class Integrator:
         rays_before, truncated_before = self.world.rays_traced, self.truncated
         paths, found, norms, reps = self.run_batch(ctx)
         with timers("film"):
-            film = Film(self.eye.width, self.eye.height, self.components)
+            film = self.new_film()
             film.record_batch(ctx.splats, reps, norms)
         seconds = time.perf_counter() - t0
         return BatchResult(index, film.arrays(), paths, found, self.world.rays_traced - rays_before,
@@ -265,7 +282,7 @@ class Integrator:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.parallel) or a cluster (tracer.distributed)."""
         started = time.perf_counter()
-        self.fit_batch(budget)
+        budget = self.prepare(budget)
         return drive(self, budget, LocalExecutor(self), 1, progress, should_stop, started=started, preview=preview)
 
     def merge_extra(self, total: dict, batch: dict):
@@ -359,7 +376,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     method = f"{local.name} {label}" if label else local.name
     done: dict[int, BatchResult] = {}
     pending: dict[int, object] = {}
-    film = Film(local.eye.width, local.eye.height, local.components)
+    film = local.new_film()
     rays = paths = found = truncated = merged = next_index = 0
     stages = Timers()
     extra: dict = {}
