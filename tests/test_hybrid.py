@@ -1,0 +1,155 @@
+"""The hybrid method and the automatic choice of a method (tracer/integrators/hybrid.py, issue 12)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import edit_json, z_bound
+
+from tracer.integrators import INTEGRATORS, Budget
+from tracer.integrators.hybrid import applicable, median_relative_variance
+from tracer.parallel import films_match, render_parallel
+from tracer.pupil import pupil_diameter_mm
+from tracer.render import adaptation_luminance
+from tracer.scene import load_scene
+from tracer.units import luminance
+from tracer.world import World
+
+#: A third of hud-direct's retina in each direction: the same optics, a ninth of the pixels.
+LOW = (140, 52)
+
+
+def _sky(folder, cd_m2: float = 1000.0):
+    edit_json(folder, lambda d: d.update(environment={"type": "uniform", "luminance": cd_m2}))
+
+
+def _blocks(y: np.ndarray, var: np.ndarray, shape=(4, 8)):
+    """Means of Y over a grid of blocks and their standard errors (independent pixels)."""
+    h, w = y.shape
+    by, bx = h // shape[0], w // shape[1]
+    yb = y[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx)
+    vb = var[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx)
+    n = by * bx
+    return yb.mean(axis=(1, 3)).ravel(), np.sqrt(vb.sum(axis=(1, 3)).ravel()) / n
+
+
+def test_hybrid_is_the_sum_of_its_channels_and_agrees_with_backward(preset):
+    """hud-direct against a 1000 cd/m^2 sky: the hybrid's image is the sum of its two channels (and
+    their variances add), and it agrees block by block with backward tracing of the whole scene at
+    once, a method that converges for every path here: nothing is counted twice, nothing lost."""
+    folder = preset("hud-direct", resolution=LOW)
+    _sky(folder)
+    hybrid = INTEGRATORS["hybrid"](load_scene(folder), 3).render(Budget(rays=10_000_000))
+    film = hybrid.film
+    assert set(film.groups) == {"hud", "environment"}
+    np.testing.assert_allclose(film.rgb(), film.rgb("hud") + film.rgb("environment"), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(film.variance_y(), film.variance_y("hud") + film.variance_y("environment"),
+                               rtol=1e-12, atol=0)
+    channels = hybrid.extra["channels"]
+    assert channels["hud"]["method"] == "backward" and channels["environment"]["method"] == "backward"
+    reference = INTEGRATORS["backward"](load_scene(folder), 4).render(Budget(rays=14_000_000))
+    a, sa = _blocks(luminance(film.rgb()), film.variance_y())
+    b, sb = _blocks(luminance(reference.film.rgb()), reference.film.variance_y())
+    lit = (a > 0) & (b > 0)
+    z = (a[lit] - b[lit]) / np.sqrt(sa[lit] ** 2 + sb[lit] ** 2)
+    assert lit.sum() >= 24 and np.abs(z).max() < z_bound(int(lit.sum())), z
+    # The environment channel alone is what the sky adds: 1000 cd/m^2 through the windshield where the
+    # eye sees it directly (Fresnel transmission of a 4.76 mm plate at these angles: 0.7 to 0.92).
+    env = luminance(film.rgb("environment"))
+    assert 700 < np.median(env[env > 0]) < 920
+
+
+def test_one_and_two_processes_give_the_same_hybrid_image(preset):
+    """For a budget in rays the pilots cost rays, not seconds, so the decisions are the same in every
+    run; the workers take them from the parent: the same channels, batch sizes and image."""
+    folder = preset("hud-direct", resolution=LOW)
+    _sky(folder)
+    one = INTEGRATORS["hybrid"](load_scene(folder), 5).render(Budget(rays=4_000_000))
+    two = render_parallel(INTEGRATORS["hybrid"](load_scene(folder), 5), Budget(rays=4_000_000), workers=2)
+    assert one.batches == two.batches and films_match(one, two)
+    for name in ("hud", "environment"):
+        a, b = one.extra["channels"][name], two.extra["channels"][name]
+        assert (a["method"], a["batch_size"], a["every"]) == (b["method"], b["batch_size"], b["every"])
+
+
+def test_channels_and_methods_that_the_scene_does_not_need_are_skipped_with_the_reason(preset):
+    """Model no more than the scene needs: no environment channel without an environment, no HUD
+    channel without an emitter, no photon pass where next-event estimation reaches every scattering
+    surface, no forward tracing of the environment; each says why."""
+    folder = preset("hud-direct", resolution=LOW)
+    dark_sky = INTEGRATORS["hybrid"](load_scene(folder), 1).render(Budget(rays=2_000_000)).extra["channels"]
+    assert dark_sky["environment"]["skipped"] == "the environment is off or black"
+    hud = dark_sky["hud"]
+    assert hud["method"] == "backward" and hud["chosen_by"] == "pilots"
+    pilots = {p["method"]: p for p in hud["pilots"]}
+    assert pilots["forward"]["skipped"] is None and pilots["forward"]["efficiency"] < pilots["backward"]["efficiency"]
+    assert "next-event estimation reaches them" in pilots["photon"]["skipped"]
+
+    _sky(folder)
+    edit_json(folder, lambda d: [o["emission"].update(luminance=0.0) for o in d["objects"] if "emission" in o])
+    no_leds = INTEGRATORS["hybrid"](load_scene(folder), 1).render(Budget(rays=1_000_000))
+    ch = no_leds.extra["channels"]
+    assert ch["hud"]["skipped"] == "the scene has no emitter"
+    assert ch["environment"]["method"] == "backward" and ch["environment"]["chosen_by"] == "the only one that applies"
+    assert luminance(no_leds.film.rgb()).max() > 0
+
+    why = applicable(World(load_scene(folder)).channel(lights=False), False, True)
+    assert why["backward"] is None and "emits from the scene's emitters only" in why["forward"]
+    assert "photons leave the scene's emitters only" in why["photon"]
+
+
+def _efficiency_of(method: str, folder, seed: int, rays: int) -> tuple[float, np.ndarray, np.ndarray]:
+    res = INTEGRATORS[method](load_scene(folder), seed).render(Budget(rays=rays))
+    return res.rays, luminance(res.film.rgb()), res.film.variance_y()
+
+
+@pytest.mark.parametrize("name,expected", [("hud-direct", "backward"), ("hud-direct-condenser", "photon"),
+                                           ("hud-screen", "photon")])
+def test_auto_picks_on_its_pilots_the_method_a_longer_run_confirms(preset, name, expected):
+    """auto chooses by short pilots; renders of every applicable method several times as long, side by
+    side, scored the same way (the median relative variance of the pixels any of them lit, times the
+    rays), confirm the choice: backward with next-event estimation where the scatterer sees the LEDs
+    (hud-direct), photon maps where a lens stands between them (the condenser, the projection lens)."""
+    folder = preset(name, resolution=LOW)
+    auto = INTEGRATORS["auto"](load_scene(folder), 2).render(Budget(rays=6_000_000))
+    scene = auto.extra["channels"]["scene"]
+    chosen = scene["method"]
+    ran = [p for p in scene["pilots"] if p["skipped"] is None]
+    longest = max(p["rays"] for p in ran)
+    longer = {p["method"]: _efficiency_of(p["method"], folder, 11, 4 * longest) for p in ran}
+    methods = list(longer)
+    images = [longer[m][1] for m in methods]
+    variances = [longer[m][2] for m in methods]
+    score = {m: median_relative_variance(images, variances, k) * longer[m][0] for k, m in enumerate(methods)}
+    confirmed = min(score, key=score.get)
+    assert chosen == confirmed == expected, (chosen, score)
+
+
+def test_the_pupil_follows_the_adaptation_luminance_of_the_image(preset):
+    """eye "pupil_diameter_mm": "auto" with "adaptation_luminance_cd_m2": "image": a pilot finds the
+    adaptation luminance (here the mean) of what the eye sees and Watson & Yellott's formula gives the
+    pupil; the report says both, and they agree with the final image's own adaptation luminance."""
+    from tracer.render import render_scene
+
+    folder = preset("hud-direct", resolution=LOW)
+    _sky(folder, 3000.0)
+    edit_json(folder, lambda d: d["eye"].update(pupil_diameter_mm="auto", adaptation_luminance_cd_m2="image",
+                                                adaptation="mean", observer_age=40))
+    report, result = render_scene(load_scene(folder), "backward", Budget(rays=3_000_000), 1, folder.parent / "out")
+    pupil = result.extra["pupil"]
+    final = adaptation_luminance(luminance(result.film.rgb()), "mean")
+    assert report["adaptation_mode"] == "mean" and report["adaptation_luminance"] == pytest.approx(final)
+    assert pupil["pilot_adaptation_luminance_cd_m2"] == pytest.approx(final, rel=0.05)
+    assert pupil["pupil_diameter_mm"] == pytest.approx(pupil_diameter_mm(pupil["pilot_adaptation_luminance_cd_m2"],
+                                                                         age_years=40), rel=1e-12)
+    # The first guess was the sky's 3000 cd/m^2; the eye sees the sky through the windshield, and the HUD.
+    assert pupil["first_guess_pupil_diameter_mm"] == pytest.approx(pupil_diameter_mm(3000.0, age_years=40))
+
+
+def test_adaptation_luminance_is_the_log_average_or_the_mean_of_the_lit_pixels():
+    y = np.array([[0.0, 10.0], [100.0, 1000.0]])
+    assert adaptation_luminance(y, "mean") == pytest.approx(370.0)
+    assert adaptation_luminance(y, "log_average") == pytest.approx(100.0, rel=1e-5)  # exp(mean(ln L))
+    assert math.isclose(adaptation_luminance(np.zeros((2, 2)), "mean"), 0.0)
