@@ -40,7 +40,7 @@ from .units import luminance, normalize_color
 from .validate import MAX_ABS, MAX_LUMINANCE, FieldChecker
 
 #: Calibration modes of :class:`HdriEnvironment`.
-CALIBRATION_MODES = ("scale", "mean", "max")
+CALIBRATION_MODES = ("scale", "mean", "max", "min")
 
 
 def _as_directions(d) -> np.ndarray:
@@ -266,7 +266,10 @@ class HdriEnvironment(Environment):
       sin lat_bottom) per pixel (:func:`row_solid_angle_fractions`), i.e. cos(latitude)
       integrated over the row band;
     - ``"max"``: k makes the largest pixel luminance equal to value cd/m^2 (bilinear
-      interpolation never exceeds it, so it is also the largest radiance returned).
+      interpolation never exceeds it, so it is also the largest radiance returned);
+    - ``"min"``: k makes the smallest pixel luminance equal to value cd/m^2 (bilinear
+      interpolation never falls below it); a panorama with a black pixel cannot be calibrated
+      so, whatever k.
 
     Parameters
     ----------
@@ -274,7 +277,7 @@ class HdriEnvironment(Environment):
         Linear Rec.709 RGB, finite and >= 0; row 0 is the top row (the +z pole). Kept as
         float32 if given as float32, else as float64; lookups compute in float64.
     calibration : str
-        One of ``"scale"``, ``"mean"``, ``"max"``.
+        One of ``"scale"``, ``"mean"``, ``"max"``, ``"min"``.
     value : float
         The calibration value (k for "scale", cd/m^2 otherwise), finite and > 0.
     rotation_deg : float
@@ -286,8 +289,9 @@ class HdriEnvironment(Environment):
     ------
     ValueError
         An image of the wrong shape or with negative or non-finite pixels, an unknown
-        calibration, a value <= 0 or not finite, a non-finite rotation, or an image whose
-        luminance is zero everywhere with calibration "mean" or "max".
+        calibration, a value <= 0 or not finite, a non-finite rotation, an image whose
+        luminance is zero everywhere with calibration "mean" or "max", or an image with a pixel of
+        zero luminance with calibration "min".
     """
 
     def __init__(
@@ -319,9 +323,15 @@ class HdriEnvironment(Environment):
         Y = luminance(self._image)
         raw_mean = float(row_solid_angle_fractions(Y.shape[0]) @ Y.mean(axis=1))
         raw_max = float(Y.max())
+        raw_min = float(Y.min())
         if calibration != "scale" and raw_max == 0.0:
             raise ValueError(
                 f"image luminance is zero everywhere; calibration {calibration!r} cannot scale it"
+            )
+        if calibration == "min" and raw_min == 0.0:
+            raise ValueError(
+                f"{int(np.count_nonzero(Y == 0.0))} of its {Y.size} pixels are black; calibration 'min' "
+                "cannot scale a minimum of zero (use 'scale', 'mean' or 'max')"
             )
         self.calibration = calibration
         self.value = float(value)
@@ -331,10 +341,13 @@ class HdriEnvironment(Environment):
             self._k = self.value
         elif calibration == "mean":
             self._k = self.value / raw_mean
-        else:
+        elif calibration == "max":
             self._k = self.value / raw_max
+        else:
+            self._k = self.value / raw_min
         self._mean = self._k * raw_mean
         self._max = self._k * raw_max
+        self._min = self._k * raw_min
         angle = math.radians(self.rotation_deg)
         self._cos, self._sin = math.cos(angle), math.sin(angle)
         # Sampling: pixels in proportion to luminance times solid angle (row fractions), built once.
@@ -354,7 +367,7 @@ class HdriEnvironment(Environment):
     @property
     def scale_factor(self) -> float:
         """k: the factor applied to the image's own linear values (the value itself for
-        "scale"; cd/m^2 per unit of image luminance for "mean" and "max")."""
+        "scale"; cd/m^2 per unit of image luminance for "mean", "max" and "min")."""
         return self._k
 
     def _to_image(self, d: np.ndarray) -> np.ndarray:
@@ -411,6 +424,12 @@ class HdriEnvironment(Environment):
         """Largest pixel luminance, cd/m^2."""
         return self._max
 
+    @property
+    def min_luminance(self) -> float:
+        """Smallest pixel luminance, cd/m^2 (the measure of the "min" calibration; also the
+        smallest radiance returned)."""
+        return self._min
+
 
 # Fields each environment type accepts in scene.json.
 _FIELDS = {
@@ -430,7 +449,7 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
         {"type": "none"}
         {"type": "uniform", "luminance": L, "color": [r, g, b]}
         {"type": "hdri", "file": "relative/path.exr",
-         "calibration": {"mode": "scale" | "mean" | "max", "value": v},
+         "calibration": {"mode": "scale" | "mean" | "max" | "min", "value": v},
          "rotation_deg": 0}
 
     with L >= 0 cd/m^2, ``color`` optional (white; linear Rec.709, normalised to unit
@@ -458,7 +477,8 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
         With field ``environment.<field>`` for an unknown type, an unknown, missing,
         negative or non-numeric field, a black colour; with field ``environment.file`` for
         an image that is missing, unreadable, with more than 4 channels, with negative or
-        non-finite pixels, or black with calibration "mean" or "max".
+        non-finite pixels, black with calibration "mean" or "max", or with a black pixel with
+        calibration "min".
     """
     ck = FieldChecker(file, allow_external)
     ck.obj(spec, "environment")
@@ -485,7 +505,7 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
     mode = cal["mode"]
     if not isinstance(mode, str) or mode not in CALIBRATION_MODES:
         ck.fail("environment.calibration.mode", f"unknown value {mode!r}; expected one of {list(CALIBRATION_MODES)}")
-    limit = MAX_LUMINANCE if mode in ("mean", "max") else MAX_ABS
+    limit = MAX_ABS if mode == "scale" else MAX_LUMINANCE
     value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True,
                       max_value=limit)
     rotation = ck.number(spec.get("rotation_deg", 0.0), "environment.rotation_deg", min_value=-1e6, max_value=1e6)
