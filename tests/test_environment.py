@@ -1,5 +1,6 @@
 """Tests of tracer.environment: Blender's equirectangular mapping, rotation, calibration,
-the three environment kinds and the scene.json factory."""
+the three environment kinds, the sun and the scene.json factory (the sun's sampling and renders
+with it: tests/test_sun.py)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,10 @@ from conftest import z_bound
 
 from tracer.environment import (
     CALIBRATION_MODES,
+    EnvironmentWithSun,
     HdriEnvironment,
     NoEnvironment,
+    Sun,
     UniformEnvironment,
     direction_to_equirect,
     environment_from_spec,
@@ -319,6 +322,92 @@ def test_radiance_rejects_bad_directions():
             _rows(env, np.array([[np.nan, 0.0, 1.0]]))
 
 
+# --- the sun --------------------------------------------------------------------------------
+
+
+def test_sun_luminance_is_its_illuminance_over_pi_sin2_delta():
+    """L = E / (pi sin^2 delta): 1.488e9 cd/m^2 for 100,000 lx at 0.53 deg. A second method: the
+    illuminance on a surface facing the disk, 2 pi L integral_0^delta cos(theta) sin(theta) d theta,
+    by Gauss-Legendre quadrature, is E again."""
+    sun = Sun([0.0, 0.0, 1.0])
+    assert sun.illuminance_lux == 100_000.0 and sun.angular_diameter_deg == 0.53
+    delta = math.radians(0.53) / 2
+    assert sun.luminance_cd_m2 == pytest.approx(1e5 / (math.pi * math.sin(delta) ** 2), rel=1e-14)
+    assert sun.luminance_cd_m2 == pytest.approx(1.488e9, rel=1e-3)
+    nodes, weights = np.polynomial.legendre.leggauss(16)
+    theta = 0.5 * delta * (nodes + 1.0)
+    e = 2 * math.pi * sun.luminance_cd_m2 * 0.5 * delta * np.sum(weights * np.cos(theta) * np.sin(theta))
+    assert e == pytest.approx(1e5, rel=1e-12)
+    assert sun.solid_angle_sr == pytest.approx(2 * math.pi * (1 - math.cos(delta)), rel=1e-9)
+    assert sun.power == pytest.approx(2e5 / (1 + math.cos(delta)), rel=1e-12)
+    for e_lux, diameter in [(120_000.0, 0.53), (1.0, 20.0), (5e4, 0.01)]:
+        s = Sun([1.0, 2.0, 3.0], e_lux, diameter)
+        assert s.luminance_cd_m2 * math.pi * math.sin(math.radians(diameter) / 2) ** 2 == pytest.approx(e_lux)
+
+
+def test_sun_disk_edges_and_colour():
+    """Radiance L colour inside the disk (float64 and float32 directions alike), 0 outside, with the rim
+    resolved to 1 % of the 0.265 deg radius; the colour keeps unit luminance."""
+    axis = np.array([0.2, -0.6, 0.7]) / np.linalg.norm([0.2, -0.6, 0.7])
+    sun = Sun(axis * 3.0, 80_000.0, 0.53, color=(1.0, 0.8, 0.5))
+    np.testing.assert_allclose(sun.direction, axis, rtol=1e-15)
+    t = np.cross(axis, [1.0, 0.0, 0.0])
+    t /= np.linalg.norm(t)
+    delta = math.radians(0.53) / 2
+    angles = np.array([0.0, 0.5, 0.99, 1.01, 2.0, 90.0 / 0.265]) * delta
+    d = np.cos(angles)[:, None] * axis + np.sin(angles)[:, None] * t
+    for dtype in (np.float64, np.float32):
+        y = luminance(_rows(sun, d.astype(dtype)))
+        np.testing.assert_allclose(y, [sun.luminance_cd_m2] * 3 + [0.0] * 3, rtol=1e-12)
+        np.testing.assert_allclose(sun.pdf(d.astype(dtype).T), [1 / sun.solid_angle_sr] * 3 + [0.0] * 3)
+    rgb = _rows(sun, d[:1])[0]
+    np.testing.assert_allclose(rgb / rgb[0], [1.0, 0.8, 0.5], rtol=1e-12)
+
+
+@pytest.mark.parametrize("incidence_deg", [0.0, 40.0, 89.0])
+def test_sun_illuminance_on_a_tilted_surface_is_e_cos_i(incidence_deg):
+    """The mean of L max(0, n.d) / pdf over the sun's own samples is the illuminance on a surface whose
+    normal n makes the angle i with the sun: E cos(i), exactly while the disk lies above the surface's
+    horizon (here up to 89 deg), within the estimate's standard error."""
+    sun = Sun([0.0, 0.0, 1.0], 100_000.0, 0.53)
+    i = math.radians(incidence_deg)
+    normal = np.array([math.sin(i), 0.0, math.cos(i)])
+    d, radiance, pdf = sun.sample(np.random.default_rng(18).random((2, 200_000)))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, rtol=1e-14)
+    assert np.all(sun.pdf(d) == pdf) and np.all(luminance(radiance.T) == sun.luminance_cd_m2)
+    e = luminance(radiance.T) * np.maximum(normal @ d, 0.0) / pdf
+    sem = e.std() / math.sqrt(len(e))
+    assert abs(e.mean() - 1e5 * math.cos(i)) < z_bound(3) * sem + 1e-9 * 1e5
+
+
+def test_environment_with_sun_adds_the_sun_to_every_figure():
+    sun = Sun([0.0, 1.0, 0.0], 50_000.0, 1.0)
+    sky = UniformEnvironment(200.0)
+    env = EnvironmentWithSun(sky, sun)
+    assert env.mean_luminance == pytest.approx(200.0 + sun.power / (4 * math.pi), rel=1e-14)
+    assert env.max_luminance == pytest.approx(200.0 + sun.luminance_cd_m2, rel=1e-14)
+    assert env.sun_share == pytest.approx(sun.power / (sun.power + 4 * math.pi * 200.0), rel=1e-14)
+    np.testing.assert_allclose(luminance(_rows(env, [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])),
+                               [200.0 + sun.luminance_cd_m2, 200.0], rtol=1e-12)
+    assert not env.is_black and not EnvironmentWithSun(NoEnvironment(), sun).is_black
+    dark = EnvironmentWithSun(NoEnvironment(), Sun([0.0, 1.0, 0.0], 0.0))
+    assert dark.is_black and dark.sun_share == 0.0
+    hdri = HdriEnvironment(np.random.default_rng(19).random((8, 16, 3)), "mean", 300.0)
+    with_sun = EnvironmentWithSun(hdri, sun)
+    assert hdri.mean_luminance == pytest.approx(300.0) and with_sun.base is hdri  # calibrated before the sun
+
+
+def test_sun_rejects_bad_input():
+    for kwargs in [{"direction": [0.0, 0.0, 0.0]}, {"direction": [np.nan, 0.0, 1.0]},
+                   {"direction": [0, 0, 1], "illuminance_lux": -1.0},
+                   {"direction": [0, 0, 1], "illuminance_lux": np.inf},
+                   {"direction": [0, 0, 1], "angular_diameter_deg": 0.0},
+                   {"direction": [0, 0, 1], "angular_diameter_deg": 20.5},
+                   {"direction": [0, 0, 1], "color": (0.0, 0.0, 0.0)}]:
+        with pytest.raises(ValueError):
+            Sun(**kwargs)
+
+
 # --- environment_from_spec ------------------------------------------------------------------
 
 
@@ -367,6 +456,28 @@ def test_spec_hdri(scene_dir):
     assert env.calibration == "mean" and env.value == 800.0 and env.scale_factor > 0
 
 
+def test_spec_sun(scene_dir):
+    env = environment_from_spec({"type": "none", "sun": {"direction": [0, 0, 2]}}, scene_dir)
+    assert isinstance(env, EnvironmentWithSun) and isinstance(env.base, NoEnvironment)
+    sun = env.sun
+    np.testing.assert_array_equal(sun.direction, [0.0, 0.0, 1.0])
+    assert (sun.illuminance_lux, sun.angular_diameter_deg) == (100_000.0, 0.53)
+    np.testing.assert_allclose(sun.color, 1.0)
+    assert env.max_luminance == pytest.approx(1.488e9, rel=1e-3) and env.sun_share == 1.0
+    spec = {"type": "uniform", "luminance": 50,
+            "sun": {"direction": [1, 0, 1], "illuminance_lux": 60_000, "angular_diameter_deg": 2.0,
+                    "color": [1.0, 0.9, 0.8]}}
+    env = environment_from_spec(spec, scene_dir)
+    assert env.base.mean_luminance == 50.0 and env.sun.illuminance_lux == 60_000.0
+    assert env.sun.angular_diameter_deg == 2.0
+    np.testing.assert_allclose(env.sun.direction, [math.sqrt(0.5), 0.0, math.sqrt(0.5)])
+    np.testing.assert_allclose(env.sun.color / env.sun.color[0], [1.0, 0.9, 0.8])
+    env = environment_from_spec(_hdri(calibration={"mode": "mean", "value": 800},
+                                      sun={"direction": [0, 1, 0.2]}), scene_dir)
+    assert isinstance(env.base, HdriEnvironment) and env.base.mean_luminance == pytest.approx(800.0)
+    assert env.mean_luminance == pytest.approx(800.0 + env.sun.power / (4 * math.pi))
+
+
 def test_spec_hdri_grey_png_is_decoded_and_grey(scene_dir):
     env = environment_from_spec(_hdri(file="textures/grey.png", rotation_deg=10), scene_dir)
     np.testing.assert_allclose(_rows(env, np.array([[1.0, 0, 0]])), [[0.2158605] * 3], rtol=1e-6)
@@ -384,6 +495,10 @@ def _hdri(**fields):
 
 def _uniform(**fields):
     return {"type": "uniform", "luminance": 1.0, **fields}
+
+
+def _sun(**fields):
+    return {"type": "none", "sun": {"direction": [0, 0, 1], **fields}}
 
 
 @pytest.mark.parametrize(
@@ -433,6 +548,24 @@ def _uniform(**fields):
         (_hdri(rotation_deg="90"), "environment.rotation_deg"),
         (_hdri(rotation_deg=float("inf")), "environment.rotation_deg"),
         (_hdri(rotation=90), "environment.rotation"),
+        ({"type": "none", "sun": "up"}, "environment.sun"),
+        ({"type": "none", "sun": {}}, "environment.sun.direction"),
+        (_sun(direction=[0, 0, 0]), "environment.sun.direction"),
+        (_sun(direction=[0, 1]), "environment.sun.direction"),
+        (_sun(direction=[0, 1, "1"]), "environment.sun.direction[2]"),
+        (_sun(direction=[0, 1, float("nan")]), "environment.sun.direction[2]"),
+        (_sun(illuminance_lux=-1), "environment.sun.illuminance_lux"),
+        (_sun(illuminance_lux="100 klx"), "environment.sun.illuminance_lux"),
+        (_sun(illuminance_lux=2e12), "environment.sun.illuminance_lux"),
+        (_sun(angular_diameter_deg=0), "environment.sun.angular_diameter_deg"),
+        (_sun(angular_diameter_deg=-0.5), "environment.sun.angular_diameter_deg"),
+        (_sun(angular_diameter_deg=20.01), "environment.sun.angular_diameter_deg"),
+        (_sun(illuminance_lux=1e6, angular_diameter_deg=1e-4), "environment.sun"),
+        (_sun(color=[0, 0, 0]), "environment.sun.color"),
+        (_sun(color=[1, -1, 1]), "environment.sun.color[1]"),
+        (_sun(elevation_deg=30), "environment.sun.elevation_deg"),
+        (_uniform(sun={"direction": [0, 0, 1], "illuminance": 1}), "environment.sun.illuminance"),
+        (_hdri(sun={"illuminance_lux": 1}), "environment.sun.direction"),
     ],
 )
 def test_spec_errors_name_the_field(scene_dir, spec, field):

@@ -21,7 +21,8 @@ scene.json, version 1::
               "observer_age": 30, "focal_length_mm": 16.67,
               "accommodation_distance_mm": 2500.0,           # or "infinity"
               "resolution": [W, H], "fov_deg": [horizontal, vertical]},
-      "environment": {"type": "none" | "uniform" | "hdri", ...},   # see tracer.environment
+      "environment": {"type": "none" | "uniform" | "hdri", ...,    # see tracer.environment
+                      "sun": {"direction": [x, y, z], "illuminance_lux": 1e5, "angular_diameter_deg": 0.53}},
       "objects": [
         {"name": "mirror", "mesh": "meshes/mirror.obj",
          "transform": {"matrix": [[4 x 4]]} | {"translate": [..], "rotate_deg": [x, y, z], "scale": [..]},
