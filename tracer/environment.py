@@ -151,6 +151,16 @@ def row_solid_angle_fractions(height: int) -> np.ndarray:
     return 0.5 * (np.sin(edges[:-1]) - np.sin(edges[1:]))
 
 
+def panorama_rgb(pixels: np.ndarray) -> np.ndarray:
+    """The RGB of a panorama file's pixels (H, W, C) as :func:`tracer.imageio.read_image` returns them:
+    1 channel is grey, 2 grey and alpha, 3 RGB, 4 RGBA; alpha is dropped. Returns (H, W, 3); raises
+    ValueError for more than 4 channels."""
+    channels = pixels.shape[2]
+    if channels > 4:
+        raise ValueError(f"has {channels} channels; expected 1 to 4")
+    return np.repeat(pixels[..., :1], 3, axis=2) if channels <= 2 else pixels[..., :3]
+
+
 class Environment(ABC):
     """Radiance arriving from far away along directions leaving the scene."""
 
@@ -722,12 +732,8 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
         pixels = read_image(ck.path(scene_dir, image_file, "environment.file"))
     except ImageReadError as exc:
         raise SceneError(file, "environment.file", f"cannot read {image_file!r}: {exc.reason}") from exc
-    channels = pixels.shape[2]
-    if channels > 4:
-        ck.fail("environment.file", f"{image_file!r} has {channels} channels; expected 1 to 4")
-    rgb = np.repeat(pixels[..., :1], 3, axis=2) if channels <= 2 else pixels[..., :3]
     try:
-        env = HdriEnvironment(rgb, mode, value, rotation, source=image_file)
+        env = HdriEnvironment(panorama_rgb(pixels), mode, value, rotation, source=image_file)
     except ValueError as exc:
         raise SceneError(file, "environment.file", f"{image_file!r}: {exc}") from exc
     if not env.max_luminance <= MAX_LUMINANCE:
