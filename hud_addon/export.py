@@ -3,7 +3,8 @@
 Only objects with an optical role that a render shows are exported, as the depsgraph evaluates them
 (:func:`exported_objects`: at its frame, modifiers applied, every instance an object of its own);
 Blender units (the scene's unit scale) become millimetres. The active camera, as evaluated, is the
-eye; the World's HUD settings are the environment. :func:`blender_terms` turns the tracer's errors
+eye; the World's HUD settings are the environment, and a rendered Sun light its sun.
+:func:`blender_terms` turns the tracer's errors
 about an exported folder back into the Blender objects and properties they come from.
 
 An export is written as a set (:func:`export_scene`): first everything that can be checked in Blender
@@ -29,6 +30,7 @@ import bpy
 import numpy as np
 
 from ..presets._build import write_obj
+from ..tracer.environment import SUN_MAX_ANGULAR_DIAMETER_DEG
 from ..tracer.imageio import write_exr
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
@@ -283,20 +285,82 @@ def eye_spec(scene, depsgraph=None) -> dict:
     return eye
 
 
-def environment_spec(scene, plan: _Plan) -> dict:
-    """The scene.json environment block from the World's HUD settings; an HDRI panorama is checked
-    and planned as the texture "environment". Raises ValueError starting "World:" (with the image's
-    file path when its file cannot be read)."""
+def _sun_lights(depsgraph) -> list[dict]:
+    """The Sun lights that ``depsgraph`` shows (the render visibility of :func:`exported_objects`;
+    instances included, named "<light> @ <instancer>"), each as evaluated at the depsgraph's frame:
+    {"name", "direction" (toward the sun: the light shines along its -Z axis, so the sun lies along its
+    world +Z), "angle" (Blender's Angle, the disk's angular diameter, radians), "color", "illuminance_lux"
+    (HUD Sun, from the original light: properties set from Python do not always reach the evaluated
+    copy)}. Read while the depsgraph is iterated (an instance's evaluated data lives only as long)."""
+    visible = None if depsgraph.mode == "RENDER" else render_visible(depsgraph.view_layer)
+    suns, seen = [], set()
+
+    def read(name, matrix, data, original_data):
+        z = np.array(matrix, dtype=np.float64)[:3, 2]
+        suns.append({"name": name, "direction": (z / np.linalg.norm(z)).tolist(), "angle": float(data.angle),
+                     "color": [float(c) for c in data.color], "illuminance_lux": original_data.hud.illuminance_lux})
+
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type != "LIGHT" or ob.data.type != "SUN":
+            continue
+        original = ob.original
+        owner = inst.parent.original if inst.is_instance and inst.parent is not None else original
+        if visible is not None and owner.name not in visible:
+            continue
+        if not inst.is_instance:
+            seen.add(original.name)
+        read(f"{original.name} @ {owner.name}" if inst.is_instance else original.name, inst.matrix_world,
+             ob.data, original.data)
+    if visible is not None:  # hidden in the viewport only: not in the viewport's depsgraph, but rendered
+        for obj in depsgraph.scene.objects:
+            if obj.name in visible and obj.name not in seen and obj.type == "LIGHT" and obj.data.type == "SUN":
+                read(obj.name, obj.matrix_world, obj.data, obj.data)
+    return suns
+
+
+def sun_spec(depsgraph) -> dict | None:
+    """The scene.json sun block (tracer.environment.Sun) of the one Sun light ``depsgraph`` shows, None
+    without one: its direction (toward the sun, as evaluated: an animated sun moves), angular diameter
+    (Blender's Angle), colour (the light's Color) and illuminance (HUD Sun > Illuminance). Blender's own
+    Strength is not used: the tracer's sun is photometric. Raises ValueError naming the lights when more
+    than one is rendered, and naming the light when its Angle is not that of a sun (0 < Angle <= 20 deg)."""
+    suns = _sun_lights(depsgraph)
+    if not suns:
+        return None
+    if len(suns) > 1:
+        names = ", ".join(repr(s["name"]) for s in suns)
+        raise ValueError(f"lights {names}: {len(suns)} Sun lights are rendered, and the environment has one sun: "
+                         "disable all but one in renders, or delete them")
+    sun = suns[0]
+    diameter = math.degrees(sun["angle"])
+    if not 0 < diameter <= SUN_MAX_ANGULAR_DIAMETER_DEG:
+        raise ValueError(f"light {sun['name']!r}: Angle is {diameter:g}°; the sun is a disk of more than 0° and at "
+                         f"most {SUN_MAX_ANGULAR_DIAMETER_DEG:g}° (0.53° for the real sun)")
+    return {"direction": sun["direction"], "illuminance_lux": sun["illuminance_lux"],
+            "angular_diameter_deg": diameter, "color": sun["color"]}
+
+
+def environment_spec(scene, plan: _Plan, depsgraph) -> dict:
+    """The scene.json environment block from the World's HUD settings, with the sun of the rendered Sun
+    light as ``depsgraph`` evaluates it (:func:`sun_spec`); an HDRI panorama is checked and planned as the
+    texture "environment". Raises ValueError starting "World:" (with the image's file path when its file
+    cannot be read), or naming the Sun lights at fault."""
     world = scene.world
-    if world is None or world.hud.kind == "none":
-        return {"type": "none"}
-    h = world.hud
-    if h.kind == "uniform":
-        return {"type": "uniform", "luminance": h.luminance, "color": [float(c) for c in h.color]}
-    if h.image is None:
+    h = world.hud if world is not None else None
+    if h is None or h.kind == "none":
+        spec = {"type": "none"}
+    elif h.kind == "uniform":
+        spec = {"type": "uniform", "luminance": h.luminance, "color": [float(c) for c in h.color]}
+    elif h.image is None:
         raise ValueError("World: an HDRI environment needs a panorama image")
-    return {"type": "hdri", "file": plan.image(h.image, "environment", "World: HDRI"),
-            "calibration": {"mode": h.calibration, "value": h.value}, "rotation_deg": h.rotation_deg}
+    else:
+        spec = {"type": "hdri", "file": plan.image(h.image, "environment", "World: HDRI"),
+                "calibration": {"mode": h.calibration, "value": h.value}, "rotation_deg": h.rotation_deg}
+    sun = sun_spec(depsgraph)
+    if sun is not None:
+        spec["sun"] = sun
+    return spec
 
 
 def _mesh_stems(items) -> dict[str, str]:
@@ -488,7 +552,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     mm = unit_mm(scene)
     plan = _Plan()
     eye = eye_spec(scene, depsgraph)
-    environment = environment_spec(scene, plan)
+    environment = environment_spec(scene, plan, depsgraph)
     items, meshes = exported_objects(depsgraph)
     stems = _mesh_stems(items)
     mesh_files: dict = {}
@@ -536,6 +600,11 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
 _EXPORT_FILE = re.compile(r"^'?(?:textures|meshes)/[^':]*'?:\s*")
 
 
+#: The Blender terms of the fields of the environment's sun block.
+_SUN_TERMS = {"direction": "rotation", "illuminance_lux": "HUD Sun > Illuminance", "angular_diameter_deg": "Angle",
+              "color": "Color"}
+
+
 def _image_hint(image) -> str:
     if image is not None and image.source == "GENERATED" and image.packed_file is None:
         return (f" (image {image.name!r} is a generated image that is not packed: Blender does not save its pixels "
@@ -570,6 +639,11 @@ def blender_terms(error, folder: Path, scene) -> str:
             where += f": emission{': ' + key if key else ''}"
         elif block:
             where += f": {block}"
+    elif field.startswith("environment.sun"):
+        suns = [o.name for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN" and not o.hide_render]
+        where = f"light {suns[0]!r}" if len(suns) == 1 else "the Sun light"
+        key = field[len("environment.sun"):].lstrip(".").split("[")[0]
+        where += ": " + _SUN_TERMS.get(key, "HUD Sun")
     elif field.startswith("environment"):
         world = scene.world
         image = world.hud.image if world is not None else None

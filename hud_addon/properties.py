@@ -1,7 +1,8 @@
 """Property groups: Scene.hud (render settings and every method's options), Object.hud (optical role,
-the material's fields, emission), Camera.hud (eye), World.hud (environment). One PointerProperty per
-datablock type. The fields of materials, of the emission block and of the methods' options come from
-the tracer's schemas (hud_addon/schema_ui.py), so a new material or option needs no change here."""
+the material's fields, emission), Camera.hud (eye), World.hud (environment), Light.hud (a Sun light's
+illuminance: the environment's sun). One PointerProperty per datablock type. The fields of materials,
+of the emission block and of the methods' options come from the tracer's schemas
+(hud_addon/schema_ui.py), so a new material or option needs no change here."""
 
 import bpy
 from bpy.props import (
@@ -14,6 +15,7 @@ from bpy.props import (
     StringProperty,
 )
 
+from ..tracer.environment import SUN_ILLUMINANCE_LX
 from ..tracer.integrators import DEFAULT_METHOD, INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
@@ -159,17 +161,29 @@ class HudWorldSettings(bpy.types.PropertyGroup):
     image: PointerProperty(name="Panorama", type=bpy.types.Image, description="Equirectangular HDR panorama")
     calibration: EnumProperty(name="Calibration", items=[("scale", "Scale", "Multiply the image by a factor"),
                                                          ("mean", "Mean", "Mean luminance, cd/m^2"),
-                                                         ("max", "Max", "Maximum luminance, cd/m^2")], default="mean",
+                                                         ("max", "Max", "Maximum luminance, cd/m^2"),
+                                                         ("min", "Min", "Minimum luminance, cd/m^2 (a panorama "
+                                                                        "without black pixels)")], default="mean",
                               description="How the panorama's values become cd/m^2")
     value: FloatProperty(name="Value", default=1000.0, min=1e-9,
-                         description="The factor (Scale), or the target luminance in cd/m^2 (Mean, Max)")
+                         description="The factor (Scale), or the target luminance in cd/m^2 (Mean, Max, Min)")
     rotation_deg: FloatProperty(name="Rotation", default=0.0, description="Turn of the panorama about +z, degrees")
     rotation_deg_shown: angle_twin("rotation_deg", "Rotation", "Turn of the panorama about +z")
 
 
-CLASSES = (HudSceneSettings, HudObjectSettings, HudCameraSettings, HudWorldSettings)
+class HudLightSettings(bpy.types.PropertyGroup):
+    """A Sun light is the environment's sun (its direction, Angle and Color are Blender's own)."""
+
+    illuminance_lux: FloatProperty(name="Illuminance", default=SUN_ILLUMINANCE_LX, min=0.0, soft_max=150_000.0,
+                                   description="Illuminance of the sun on a surface facing it, lx (about 100,000 lx "
+                                               "at a clear noon); the sun is a disk of the light's Angle whose "
+                                               "luminance gives this illuminance. Used for Sun lights only")
+
+
+CLASSES = (HudSceneSettings, HudObjectSettings, HudCameraSettings, HudWorldSettings, HudLightSettings)
 POINTERS = ((bpy.types.Scene, HudSceneSettings), (bpy.types.Object, HudObjectSettings),
-            (bpy.types.Camera, HudCameraSettings), (bpy.types.World, HudWorldSettings))
+            (bpy.types.Camera, HudCameraSettings), (bpy.types.World, HudWorldSettings),
+            (bpy.types.Light, HudLightSettings))
 
 
 def register():

@@ -1,7 +1,10 @@
 """Panels, shown only when the HUD Tracer engine is active."""
 
+import math
+
 import bpy
 
+from ..tracer.environment import Sun
 from ..tracer.hudfigures import readouts
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
@@ -190,7 +193,35 @@ class HUD_PT_world(_HudPanel, bpy.types.Panel):
             col.prop(h, "rotation_deg_shown")
 
 
-CLASSES = (HUD_PT_render, HUD_PT_readouts, HUD_PT_object, HUD_PT_eye, HUD_PT_world)
+class HUD_PT_sun(_HudPanel, bpy.types.Panel):
+    """A Sun light is the environment's sun (hud_addon.export.sun_spec); other lights are not exported."""
+
+    bl_label = "HUD Sun"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and getattr(context, "light", None) is not None
+
+    def draw(self, context):
+        light = context.light
+        col = self.layout.column()
+        if light.type != "SUN":
+            col.label(text="HUD Tracer exports Sun lights only, as the environment's sun;", icon="INFO")
+            col.label(text="a lamp is a mesh that emits (Object > HUD Optical Role)", icon="BLANK1")
+            return
+        col.prop(light.hud, "illuminance_lux", text="Illuminance (lx)")
+        col.prop(light, "angle", text="Angular diameter")
+        col.prop(light, "color")
+        try:
+            sun = Sun((0.0, 0.0, 1.0), light.hud.illuminance_lux, math.degrees(light.angle))
+            col.label(text=f"Disk luminance {sun.luminance_cd_m2:.3g} cd/m²")
+        except ValueError as e:
+            col.label(text=str(e), icon="ERROR")
+        col.label(text="Toward the sun: the light's +Z (it shines along -Z)")
+
+
+CLASSES = (HUD_PT_render, HUD_PT_readouts, HUD_PT_object, HUD_PT_eye, HUD_PT_world, HUD_PT_sun)
 
 #: Blender's own panels that apply to HUD Tracer renders: resolution, frame range, output and colour
 #: management, the camera's lens and display, the mesh's UV maps (an LCD slide needs them) and Metadata

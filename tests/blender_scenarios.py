@@ -320,7 +320,7 @@ def scenario_tooltips():
     finding 9: properties without a tooltip)."""
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     missing, groups = [], []
-    for owner in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World):
+    for owner in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World, bpy.types.Light):
         pointer = owner.bl_rna.properties.get("hud")
         if pointer is None:
             continue
@@ -584,9 +584,10 @@ def scenario_no_light():
 def scenario_unregister():
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     before = hud_names()
-    props_before = [hasattr(t, "hud") for t in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World)]
+    owners = (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World, bpy.types.Light)
+    props_before = [hasattr(t, "hud") for t in owners]
     disable(module)
-    props_after = [hasattr(t, "hud") for t in (bpy.types.Scene, bpy.types.Object, bpy.types.Camera, bpy.types.World)]
+    props_after = [hasattr(t, "hud") for t in owners]
     engines = bpy.context.scene.render.bl_rna.properties["engine"].enum_items.keys()
     return {"before": before, "after": hud_names(), "props_before": props_before, "props_after": props_after,
             "engines": [e for e in ("HUD_TRACER",) if e in engines]}
@@ -662,6 +663,95 @@ def scenario_save_blend(path, preset):
     bpy.ops.wm.save_as_mainfile(filepath=path)
     disable(module)
     return {"saved": path}
+
+
+def scenario_sun(out):
+    """A Sun light as the environment's sun: a 4 m Lambertian floor seen from 0.5 m above; a Sun light
+    turned 60 deg about x (it shines along its -Z: toward +y and down, so the sun stands 30 deg high
+    toward -y), Angle 0.53 deg, a warm colour, HUD Sun 80,000 lx, keyframed to turn 90 deg about z at
+    frame 2; a point light beside it (not exported). Exports: frame 1 with no World, frame 2, frame 1
+    with an HDRI World calibrated to its minimum; then the failures: a second Sun light rendered, the
+    same disabled in renders (exported again), an Angle of 0, a black Color in an F12 render; and the
+    HUD Sun panel drawn."""
+    import math
+    import types
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    export_mod = sys.modules[f"{module}.hud_addon.export"]
+    ui_mod = sys.modules[f"{module}.hud_addon.ui"]
+    out = Path(out)
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = 1.0
+    for obj in list(scene.objects):
+        if obj.type != "CAMERA":
+            bpy.data.objects.remove(obj)
+    scene.world = None
+    bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0.0, 0.0, 0.0))
+    floor = bpy.context.object
+    floor.name, floor.hud.role, floor.hud.reflectance = "floor", "lambertian", (0.5, 0.5, 0.5)
+    cam = scene.camera
+    cam.location, cam.rotation_euler = (0.0, 0.0, 0.5), (0.0, 0.0, 0.0)  # looking straight down
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 8, 8, 100
+    light = bpy.data.lights.new("Sun", type="SUN")
+    light.angle, light.color, light.hud.illuminance_lux = math.radians(0.53), (1.0, 0.9, 0.8), 80_000.0
+    sun = bpy.data.objects.new("Sun", light)
+    scene.collection.objects.link(sun)
+    for frame, turn in ((1, 0.0), (2, 90.0)):
+        sun.rotation_euler = (math.radians(60.0), 0.0, math.radians(turn))
+        sun.keyframe_insert("rotation_euler", frame=frame)
+    lamp = bpy.data.objects.new("lamp", bpy.data.lights.new("lamp", type="POINT"))
+    scene.collection.objects.link(lamp)
+
+    def export(name):
+        try:
+            bpy.ops.hud.export_scene(directory=str(out / name))
+            return None
+        except RuntimeError as e:  # the operator's report
+            return str(e)
+
+    scene.frame_set(1)
+    messages = {"frame1": export("frame1")}
+    scene.frame_set(2)
+    messages["frame2"] = export("frame2")
+    scene.frame_set(1)
+    directions = {"frame1": list(sun.matrix_world.col[2][:3])}
+    scene.frame_set(2)
+    directions["frame2"] = list(sun.matrix_world.col[2][:3])
+    scene.frame_set(1)
+    sky = bpy.data.images.new("sky", 16, 8, float_buffer=True)
+    sky.pixels.foreach_set([0.2 + 0.01 * (i % 7) if i % 4 != 3 else 1.0 for i in range(16 * 8 * 4)])
+    sky.filepath_raw, sky.file_format = str(out / "sky.exr"), "OPEN_EXR"
+    sky.save()
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    world.hud.kind, world.hud.image, world.hud.calibration, world.hud.value = "hdri", sky, "min", 5.0
+    messages["hdri_min"] = export("hdri_min")
+    second = bpy.data.objects.new("Sun.second", bpy.data.lights.new("Sun.second", type="SUN"))
+    scene.collection.objects.link(second)
+    messages["two_suns"] = export("two_suns")
+    second.hide_render = True
+    messages["second_hidden"] = export("second_hidden")
+    light.angle = 0.0
+    messages["angle_0"] = export("angle_0")
+    light.angle = math.radians(0.53)
+    light.color = (0.0, 0.0, 0.0)  # refused by the tracer's validation: F12 names the light and its Color
+    engine_mod = sys.modules[f"{module}.hud_addon.engine"]
+    messages["black_f12"] = engine_mod.render_final(StubEngine(10**9), bpy.context.evaluated_depsgraph_get())["error"]
+    light.color = (1.0, 0.9, 0.8)
+    labels = []
+
+    class Panel:
+        layout = _Layout(labels)
+
+    context = types.SimpleNamespace(light=light, engine="HUD_TRACER", scene=scene)
+    polls = {"sun": ui_mod.HUD_PT_sun.poll(context),
+             "other engine": ui_mod.HUD_PT_sun.poll(types.SimpleNamespace(light=light, engine="CYCLES")),
+             "no light": ui_mod.HUD_PT_sun.poll(types.SimpleNamespace(light=None, engine="HUD_TRACER"))}
+    ui_mod.HUD_PT_sun.draw(Panel(), context)
+    spec_direct = export_mod.sun_spec(bpy.context.evaluated_depsgraph_get())
+    disable(module)
+    return {"messages": messages, "directions": directions, "polls": polls, "labels": labels,
+            "spec_direct": spec_direct}
 
 
 if __name__ == "__main__":

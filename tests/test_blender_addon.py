@@ -167,8 +167,8 @@ def test_cancel_stops_within_one_batch_and_writes_a_clean_result(threads):
 
 def test_unregister_leaves_nothing_behind_and_the_process_exits():
     res, proc = scenario("unregister", timeout=120)
-    assert "HUD_OT_add_preset" in res["before"] and res["props_before"] == [True] * 4
-    assert res["after"] == [] and res["props_after"] == [False] * 4
+    assert "HUD_OT_add_preset" in res["before"] and res["props_before"] == [True] * 5
+    assert res["after"] == [] and res["props_after"] == [False] * 5
     assert res["engines"] == []
 
 
@@ -495,3 +495,52 @@ def test_eyebox_sweep_operator_finds_the_command_lines_eyebox_on_hud_direct(read
     f = json.loads((out / "eyebox" / "eyebox.json").read_text())["figures"]
     assert f["grid_width_mm"] == pytest.approx(120.0) and f["grid_height_mm"] == pytest.approx(40.0)
     assert res["eyebox_image"] is True
+
+
+def test_a_sun_light_exports_as_the_environments_sun(tmp_path):
+    """A Sun light turned 60 deg about x shines along its -Z (toward +y and down): the exported sun stands
+    30 deg high toward -y (its +Z), with the light's Angle, Color and HUD Sun illuminance; keyframed to
+    turn 90 deg about z, frame 2's sun stands toward +x. The folder loads in the tracer, and its floor
+    (albedo 0.5) renders rho E sin(30 deg) / pi. With an HDRI World calibrated to its minimum both
+    export together. Two rendered Sun lights are refused naming both (one disabled in renders is not
+    counted), an Angle of 0 naming the light, a black Color (the tracer's refusal, in an F12 render)
+    naming the light and its Color; the HUD Sun panel shows with the engine and gives the disk's
+    luminance."""
+    res, _ = scenario("sun", tmp_path)
+    m = res["messages"]
+    assert m["frame1"] is None and m["frame2"] is None and m["hdri_min"] is None and m["second_hidden"] is None, m
+    s60, c60 = math.sin(math.radians(60.0)), math.cos(math.radians(60.0))
+    env1 = json.loads((tmp_path / "frame1" / "scene.json").read_text())["environment"]
+    assert env1["type"] == "none" and set(env1["sun"]) == {"direction", "illuminance_lux", "angular_diameter_deg",
+                                                             "color"}
+    sun1 = env1["sun"]
+    np.testing.assert_allclose(sun1["direction"], [0.0, -s60, c60], atol=1e-6)
+    np.testing.assert_allclose(sun1["direction"], res["directions"]["frame1"], atol=1e-6)
+    assert sun1["illuminance_lux"] == pytest.approx(80_000.0) and sun1["angular_diameter_deg"] == pytest.approx(0.53)
+    np.testing.assert_allclose(sun1["color"], [1.0, 0.9, 0.8], atol=1e-6)
+    sun2 = json.loads((tmp_path / "frame2" / "scene.json").read_text())["environment"]["sun"]
+    np.testing.assert_allclose(sun2["direction"], [s60, 0.0, c60], atol=1e-6)
+    np.testing.assert_allclose(sun2["direction"], res["directions"]["frame2"], atol=1e-6)
+    assert res["spec_direct"]["direction"] == pytest.approx(sun1["direction"], abs=1e-6)
+    from tracer.environment import EnvironmentWithSun, HdriEnvironment
+    from tracer.scene import load_scene
+
+    sc = load_scene(tmp_path / "frame1")
+    assert isinstance(sc.environment, EnvironmentWithSun)
+    np.testing.assert_allclose(sc.environment.sun.direction, [0.0, -s60, c60], atol=1e-6)
+    y, var, _ = render(tmp_path / "frame1", "backward", 100_000)
+    expected = 0.5 * 80_000.0 * math.sin(math.radians(30.0)) / math.pi
+    assert np.all(np.abs(y - expected) < z_bound(y.size) * np.sqrt(var)), (y.mean(), expected)
+    hdri = json.loads((tmp_path / "hdri_min" / "scene.json").read_text())["environment"]
+    assert hdri["type"] == "hdri" and hdri["calibration"] == {"mode": "min", "value": pytest.approx(5.0)}
+    assert hdri["sun"]["illuminance_lux"] == pytest.approx(80_000.0)
+    env = load_scene(tmp_path / "hdri_min").environment
+    assert isinstance(env.base, HdriEnvironment) and env.base.min_luminance == pytest.approx(5.0)
+    assert env.sun.luminance_cd_m2 == pytest.approx(80_000.0 / (math.pi * math.sin(math.radians(0.265)) ** 2),
+                                                    rel=1e-5)
+    for words in ("'Sun'", "'Sun.second'", "2 Sun lights", "disable"):
+        assert words in m["two_suns"], m["two_suns"]
+    assert "'Sun'" in m["angle_0"] and "Angle is 0" in m["angle_0"], m["angle_0"]
+    assert m["black_f12"].startswith("light 'Sun': Color: ") and "black" in m["black_f12"], m["black_f12"]
+    assert res["polls"] == {"sun": True, "other engine": False, "no light": False}
+    assert f"Disk luminance {env.sun.luminance_cd_m2:.3g} cd/m²" in res["labels"]
