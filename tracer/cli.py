@@ -1,4 +1,4 @@
-"""Command line: ``hud-trace render | presets | export | methods | readouts | false-colour | eyebox``.
+"""Command line: ``hud-trace render | presets | export | methods | readouts | false-colour | eyebox | sweep``.
 
 Exit status of ``render`` (each states what is on disk afterwards):
 
@@ -22,6 +22,13 @@ add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one l
 written; 2 bad input, before the scan (nothing written); 3 written, but the analysis cannot predict
 the scene (eyebox.json's ``valid`` is false and stderr says why); 4 the outputs could not be written
 (the folder keeps its earlier ones); 5 aborted by Ctrl-C (nothing written).
+
+``sweep`` renders a scene over a grid of scene.json values (tracer.sweep) into a folder: runs/<k>/ and
+sweep.csv, sweep.json and sweep.png, as one set: 0 written; 2 bad input, before any ray (nothing
+written); 3 written, but no run meets the requirements (``--require``); 4 the outputs could not be
+written (the folder keeps its earlier sweep); 130 stopped by Ctrl-C, SIGTERM or SIGHUP: the current
+run stops as ``render`` does and the runs done are written, marked partial; 5 aborted by a second
+Ctrl-C (nothing written).
 """
 
 from __future__ import annotations
@@ -364,6 +371,72 @@ def cmd_eyebox(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from .allocator import keep_freed_memory
+    from .integrators import Budget
+    from .outputs import OutputError
+    from .sweep import SweepArgumentError, check_arguments, open_outputs, plan_sweep, run_sweep
+
+    try:
+        check_render_args(args)
+        fields, requirements = check_arguments(args.set, args.log, args.require, args.x, args.y)
+    except ArgumentError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except SweepArgumentError as e:
+        print(f"error: {e.argument}: {e.message}", file=sys.stderr)
+        return EXIT_INPUT
+    keep_freed_memory()
+    budget = Budget(rays=args.rays, seconds=args.seconds)
+    flag = StopFlag()
+    bar = None if args.quiet else ProgressBar()
+    absent: set[str] = set()
+
+    def on_run(result, run):
+        if bar is not None and bar.tty:
+            sys.stderr.write("\n")
+        print(result.run_line(run), file=sys.stderr)
+        if not run.found_light:
+            print(f"warning: run {run.index}: the method found no light path", file=sys.stderr)
+        for q, j in zip(result.plan.requirements, result.judge(run), strict=True):
+            if j["value"] is None and not run.partial and q.text not in absent:
+                absent.add(q.text)  # said once: a mistyped KEY fails every run
+                print(f"warning: --require {q.text}: run {run.index}: {j['why']}; a run without the figure fails "
+                      "the requirement", file=sys.stderr)
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
+            scene_dir = _resolve_scene(args.scene, Path(tmp))
+            outputs = open_outputs(args.out)  # checked and locked before the scene's grid is loaded
+            try:
+                plan = plan_sweep(scene_dir, fields, requirements, tempfile.mkdtemp(dir=tmp), args.x, args.y,
+                                  progress=bar)
+                previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
+                try:
+                    result = run_sweep(plan, args.method, budget, args.seed, outputs, workers=args.workers,
+                                       batch_size=args.batch_size, progress=bar, should_stop=flag, on_run=on_run)
+                finally:
+                    for s, handler in previous.items():
+                        signal.signal(s, handler)
+            finally:
+                outputs.close()
+    except SweepArgumentError as e:
+        print(f"error: {e.argument}: {e.message}", file=sys.stderr)
+        return EXIT_INPUT
+    except (*WRITE_ERRORS, OutputError) as e:
+        return _write_errors(e, args.out)
+    finally:
+        if bar:
+            bar.close()
+    done = f"{len(result.runs)} of {len(plan.grid)} runs" if result.partial else f"{len(result.runs)} runs"
+    print(f"sweep of {done} -> {args.out}: {result.describe()}", file=sys.stderr)
+    if result.partial:
+        return EXIT_INTERRUPTED
+    if requirements and result.recommendation()["none"]:
+        return EXIT_NO_LIGHT  # 3: written, but no run meets the requirements
+    return 0
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
 
@@ -434,6 +507,37 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder")
     y.set_defaults(func=cmd_eyebox)
+    w = sub.add_parser("sweep", help="render a scene over a grid of scene.json values and judge each run",
+                       description="Render a scene once per point of a grid of scene.json values (the cartesian "
+                                   "product of every --set), with the same seed for every run, and say for which "
+                                   "values every --require holds.")
+    w.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
+    w.add_argument("--set", action="append", default=[], metavar="FIELD=START:STOP:N", required=True,
+                   help="a scene.json field and its N values from START to STOP: eye.pupil_diameter_mm, "
+                        "methods.backward.max_depth, objects[led_*].emission.luminance (every object whose name "
+                        "matches the glob); repeat for a grid of every combination (at most 500 runs)")
+    w.add_argument("--log", action="append", default=[], metavar="FIELD",
+                   help="make this --set field's values geometric (START and STOP > 0)")
+    w.add_argument("--method", choices=sorted(INTEGRATORS), default=DEFAULT_METHOD,
+                   help=f"light-transport method (default {DEFAULT_METHOD})")
+    b = w.add_mutually_exclusive_group(required=True)
+    b.add_argument("--rays", type=int, help="budget of each run in traced ray segments")
+    b.add_argument("--seconds", type=float, help="budget of each run in wall-clock seconds")
+    w.add_argument("--seed", type=int, default=0, help="the seed of every run (default 0)")
+    w.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes per run (default: one per core)")
+    w.add_argument("--batch-size", type=int, default=None, help="paths per batch, as for render")
+    w.add_argument("--out", required=True, help="output folder (runs/<k>/, sweep.csv, sweep.json, sweep.png)")
+    w.add_argument("--require", action="append", default=[], metavar="\"KEY OP VALUE\"",
+                   help="a requirement on each run's report: KEY a dotted path into it (hud.contrast_ratio, "
+                        "hud.spot.peak_cd_m2, luminance.mean), OP one of >= <= > <, VALUE a number; repeatable")
+    w.add_argument("--x", default=None, metavar="FIELD", help="the --set field on the chart's x axis (default: the "
+                                                               "first)")
+    w.add_argument("--y", action="append", default=[], metavar="KEY",
+                   help="a report key to chart, one panel each (default: the required figures, or hud.symbol_cd_m2 "
+                        "and hud.contrast_ratio)")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.set_defaults(func=cmd_sweep)
     return ap
 
 
