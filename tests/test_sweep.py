@@ -342,6 +342,10 @@ def test_a_refused_scene_or_output_folder_writes_nothing(tmp_path, no_render):
         assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
     code, err = run_cli("sweep", "analytic-mirror", "--set", f"{PANEL}=1:2:2", "--rays", 0, "--out", tmp_path / "a")
     assert code == 2 and err.startswith("error: --rays: must lie in") and len(err.strip().splitlines()) == 1, err
+    # With the progress bar on: checking a short grid shows none, so the refusal is still the one line.
+    code, err = run_cli("sweep", "analytic-mirror", "--set", f"{PANEL}=1e11:1e13:3", "--rays", 1000, "--out",
+                        tmp_path / "a")
+    assert code == 2 and err.startswith("error: --set") and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "a").exists() and (tmp_path / "file").read_text() == "x"
     assert no_render == []
 

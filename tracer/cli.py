@@ -371,6 +371,10 @@ def cmd_eyebox(args) -> int:
     return 0
 
 
+#: Seconds of checking a sweep's grid (loading every grid point's scene) before the progress bar shows it.
+SHOW_CHECKS_AFTER_S = 2.0
+
+
 def cmd_sweep(args) -> int:
     from .allocator import keep_freed_memory
     from .integrators import Budget
@@ -404,13 +408,19 @@ def cmd_sweep(args) -> int:
                 print(f"warning: --require {q.text}: run {run.index}: {j['why']}; a run without the figure fails "
                       "the requirement", file=sys.stderr)
 
+    started = time.monotonic()
+
+    def checking(fraction, message):  # the grid's scenes: shown only when loading them takes a while
+        if bar is not None and time.monotonic() - started > SHOW_CHECKS_AFTER_S:
+            bar(fraction, message)
+
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene_dir = _resolve_scene(args.scene, Path(tmp))
             outputs = open_outputs(args.out)  # checked and locked before the scene's grid is loaded
             try:
                 plan = plan_sweep(scene_dir, fields, requirements, tempfile.mkdtemp(dir=tmp), args.x, args.y,
-                                  progress=bar)
+                                  progress=checking)
                 previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
                 try:
                     result = run_sweep(plan, args.method, budget, args.seed, outputs, workers=args.workers,

@@ -1195,7 +1195,7 @@ def sweep_chart(result: SweepResult, scale: int = 2) -> tuple[np.ndarray, dict]:
                 if r.index in vals:
                     rr, cc = row(vals[r.index]), col(r.values[xi])
                     met = result.meets(r)
-                    _marker(canvas, rr, cc, 2 * s, colour, met, s)
+                    _marker(canvas, rr, cc, 3 * s, colour, met, s)
                     points.append({"run": r.index, "row": rr, "column": cc, "meets": met})
         if not vals:
             draw_text(canvas, "no run has this figure", left + pw // 2, top + ph // 2, s, anchor="centre")
