@@ -82,7 +82,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from tracer.environment import HdriEnvironment, UniformEnvironment
+from tracer.environment import EnvironmentWithSun, HdriEnvironment, UniformEnvironment
 from tracer.imageio import read_image
 from tracer.optics.materials import MATERIALS
 from tracer.scene import Scene, SceneObject
@@ -422,8 +422,12 @@ def _shapes(obj: SceneObject) -> dict:
 
 
 def environment(scene: Scene) -> dict | None:
-    """The Mitsuba emitter dict of the scene's environment, or None (module docstring)."""
+    """The Mitsuba emitter dict of the scene's environment, or None (module docstring). A sun (a disk of
+    finite size, tracer.environment.EnvironmentWithSun) has no Mitsuba counterpart here: refused."""
     env = scene.environment
+    if isinstance(env, EnvironmentWithSun):
+        raise NotImplementedError(f"{scene.name}: the Mitsuba peer does not convert the environment's sun (a disk "
+                                  "of finite angular size)")
     if isinstance(env, UniformEnvironment):
         return {"type": "constant", "radiance": _rgb(env.luminance_cd_m2 * env.color)}
     if isinstance(env, HdriEnvironment):

@@ -145,6 +145,8 @@ def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]
         schema_ui.apply(scene.hud, INTEGRATORS[name].options, block, f"{name}_", (), Path(sc.root), by_name)
     _build_eye(sc.eye, scene, coll, unit)
     _build_world(sc, scene)
+    if not sc.environment.is_black:  # a HUD against an environment: the hybrid method's two channels
+        scene.hud.method = "hybrid"
     return created, removed
 
 
@@ -155,6 +157,10 @@ def _build_eye(eye, scene, coll, unit):
     cam_data.lens = 18.0 / math.tan(math.radians(eye.fov_deg[0]) / 2)
     cam_data.clip_start, cam_data.clip_end = CLIP_MM[0] / unit, CLIP_MM[1] / unit
     cam_data.hud.pupil_diameter_mm = eye.pupil_diameter_mm
+    cam_data.hud.adaptation = eye.adaptation
+    cam_data.hud.observer_age = eye.observer_age
+    if eye.pupil_from_image:
+        cam_data.hud.pupil = "IMAGE"
     cam_data.hud.focal_length_mm = eye.focal_length_mm
     acc = eye.accommodation_distance_mm
     cam_data.hud.accommodation_distance_mm = 0.0 if math.isinf(acc) else acc

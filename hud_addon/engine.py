@@ -6,7 +6,8 @@ chosen method on the worker pool (Blender's Performance > Threads processes; the
 process for a budget in rays), showing the Render Result as it converges (update_result at most once
 a second), with progress (update_progress, update_stats) and cancel (test_break, checked between
 ray batches). The Render Result gets Combined (apparent luminance, cd/m^2, linear Rec.709), Y
-(cd/m^2) and Y_noise (the standard error of Y, cd/m^2), and the same hud:* fields as the command
+(cd/m^2) and Y_noise (the standard error of Y, cd/m^2), with the hybrid method one RGB pass per
+channel (HUD, Environment: Combined is their sum), and the same hud:* fields as the command
 line's image.exr as stamp data (written into the EXR Blender saves). The command line's report
 (tracer.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
 hud-render's report.json and the HUD Readouts panel, with the false-colour view of Y
@@ -36,10 +37,20 @@ from .export import blender_terms, export_scene, generated_image_warnings
 
 #: Extra passes written beside Combined: name -> (channels, channel ids, Blender pass type).
 PASSES = {"Y": (1, "X", "VALUE"), "Y_noise": (1, "X", "VALUE")}
+#: The passes of the hybrid method's channels (tracer.integrators.hybrid): film group -> pass name; each
+#: an RGB pass of that channel's apparent luminance, cd/m^2 (Combined is their sum).
+CHANNEL_PASSES = {"hud": "HUD", "environment": "Environment"}
+
+
+def passes_of(method: str) -> dict:
+    """The extra passes of a render with ``method``."""
+    if method != "hybrid":
+        return PASSES
+    return PASSES | {name: (3, "RGB", "COLOR") for name in CHANNEL_PASSES.values()}
 
 #: The hud:units field of Blender's EXR (its passes differ from the command line's channels).
 UNITS = ("Combined (R,G,B), Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
-         "Y_noise: standard error of Y, cd/m^2")
+         "Y_noise: standard error of Y, cd/m^2; HUD, Environment (hybrid method): each channel's R,G,B, cd/m^2")
 
 #: The report of the last final render (tracer.render.build_report, as the command line writes it),
 #: or {"error": message} when it failed. Read by hud-render for its report.json.
@@ -55,11 +66,14 @@ def worker_count(scene) -> int:
     return max(1, int(scene.render.threads))
 
 
-def write_passes(layer, image: np.ndarray, var_y: np.ndarray):
+def write_passes(layer, image: np.ndarray, var_y: np.ndarray, channels: dict | None = None):
     """Apparent luminance (H, W, 3) cd/m^2 and Y's variance (H, W) into a Render Result layer:
-    Combined (RGBA, alpha 1), Y and Y_noise; rows go bottom-up (Blender's row 0 is the bottom row),
-    contiguous float32, one foreach_set per pass."""
+    Combined (RGBA, alpha 1), Y and Y_noise, and each channel's image ({film group: (H, W, 3)}) in its
+    pass (CHANNEL_PASSES); rows go bottom-up (Blender's row 0 is the bottom row), contiguous float32,
+    one foreach_set per pass."""
     h, w = image.shape[:2]
+    for group, rgb in (channels or {}).items():
+        layer.passes[CHANNEL_PASSES[group]].rect.foreach_set(np.ascontiguousarray(rgb[::-1], dtype=np.float32).ravel())
     flipped = image[::-1].astype(np.float32)
     rgba = np.concatenate([flipped, np.ones((h, w, 1), np.float32)], axis=2)
     layer.passes["Combined"].rect.foreach_set(np.ascontiguousarray(rgba).ravel())
@@ -95,16 +109,19 @@ def render_final(engine, depsgraph) -> dict:
         world = World(tracer_scene)
         integrator = INTEGRATORS[s.method](world, s.seed)
         width, height = tracer_scene.eye.resolution
-        for name, (channels, chan_id, _) in PASSES.items():
+        for name, (channels, chan_id, _) in passes_of(s.method).items():
             engine.add_pass(name, channels, chan_id)
         rr = engine.begin_result(0, 0, width, height)
+
+        def channels_of(film) -> dict:
+            return {g: film.rgb(g) for g in film.groups if g in CHANNEL_PASSES} if s.method == "hybrid" else {}
 
         def progress(fraction, message):
             engine.update_progress(fraction)
             engine.update_stats("HUD Tracer", message)
 
         def preview(film):
-            write_passes(rr.layers[0], film.rgb(), film.variance_y())
+            write_passes(rr.layers[0], film.rgb(), film.variance_y(), channels_of(film))
             engine.update_result(rr)
 
         t0 = time.perf_counter()
@@ -115,7 +132,7 @@ def render_final(engine, depsgraph) -> dict:
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
             return _fail(engine, str(e))
-        write_passes(rr.layers[0], products.image, products.var_y)
+        write_passes(rr.layers[0], products.image, products.var_y, channels_of(result.film))
         engine.end_result(rr)
         full = engine.get_result()  # stamp data belongs to the whole result, not to the part just written
         attrs = products.attrs | {"hud:units": UNITS}
@@ -177,7 +194,7 @@ class HudRenderEngine(bpy.types.RenderEngine):
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
-        for name, (channels, chan_id, kind) in PASSES.items():
+        for name, (channels, chan_id, kind) in passes_of(scene.hud.method if scene is not None else "").items():
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
 

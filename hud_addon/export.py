@@ -278,9 +278,12 @@ def eye_spec(scene, depsgraph=None) -> dict:
            "pupil_diameter_mm": hud.pupil_diameter_mm, "focal_length_mm": hud.focal_length_mm,
            "accommodation_distance_mm": acc if acc > 0 else "infinity",
            "resolution": [w, h], "fov_deg": [math.degrees(2 * fx), math.degrees(2 * fy)]}
-    if hud.pupil == "AUTO":
+    eye["adaptation"] = hud.adaptation
+    if hud.pupil in ("AUTO", "IMAGE"):
         eye.update(pupil_diameter_mm="auto", observer_age=hud.observer_age)
-        if hud.adaptation_luminance > 0:
+        if hud.pupil == "IMAGE":
+            eye["adaptation_luminance_cd_m2"] = "image"
+        elif hud.adaptation_luminance > 0:
             eye["adaptation_luminance_cd_m2"] = hud.adaptation_luminance
     return eye
 

@@ -125,8 +125,17 @@ HudObjectSettings = type("HudObjectSettings", (bpy.types.PropertyGroup,), {"__an
 class HudCameraSettings(bpy.types.PropertyGroup):
     pupil: EnumProperty(name="Pupil", items=[("FIXED", "Fixed", "A given diameter"),
                                              ("AUTO", "From adaptation", "Watson & Yellott 2012 from the "
-                                              "adaptation luminance")], default="FIXED",
-                        description="A fixed pupil or one that follows the adaptation luminance")
+                                              "adaptation luminance"),
+                                             ("IMAGE", "Follows the image", "Watson & Yellott 2012 from the "
+                                              "luminance the eye adapts to in what it sees (a pilot render "
+                                              "finds it)")], default="FIXED",
+                        description="A fixed pupil, one for a given adaptation luminance, or one that follows the "
+                                    "image")
+    adaptation: EnumProperty(name="Adaptation", items=[
+        ("log_average", "Log-average", "Ward 1994: the log-average luminance of what the eye sees"),
+        ("mean", "Mean", "The mean luminance of what the eye sees (the paper's \"average luminance\")")],
+        default="log_average", description="How the image gives the luminance the eye adapts to (the preview, the "
+                                           "report and a pupil that follows the image use it)")
     pupil_diameter_mm: FloatProperty(name="Pupil diameter", default=4.0, min=0.01, max=20.0,
                                      description="Diameter of the eye's entrance pupil, mm")
     pupil_diameter_mm_shown: length_twin("pupil_diameter_mm", "Pupil diameter",

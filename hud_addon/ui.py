@@ -165,8 +165,10 @@ class HUD_PT_eye(_HudPanel, bpy.types.Panel):
         if h.pupil == "FIXED":
             col.prop(h, "pupil_diameter_mm_shown")
         else:
-            col.prop(h, "adaptation_luminance", text="Adaptation (cd/m²)")
+            if h.pupil == "AUTO":
+                col.prop(h, "adaptation_luminance", text="Adaptation (cd/m²)")
             col.prop(h, "observer_age", text="Age (years)")
+        col.prop(h, "adaptation")
         col.prop(h, "focal_length_mm_shown")
         col.prop(h, "accommodation_distance_mm_shown")
 

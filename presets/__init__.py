@@ -10,9 +10,12 @@ from . import (
                analytic_mirror,
                hud_direct,
                hud_direct_condenser,
+               hud_direct_env,
                hud_screen,
+               hud_screen_day,
                hud_screen_ideal,
+               hud_screen_night,
 )
 
-PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_screen_ideal, hud_direct_condenser, analytic_mirror,
-                               analytic_disk, analytic_furnace)}
+PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_screen_ideal, hud_direct_condenser, hud_screen_day,
+                               hud_screen_night, hud_direct_env, analytic_mirror, analytic_disk, analytic_furnace)}

@@ -657,6 +657,45 @@ def scenario_readouts(out):
             "false_colour": {"size": list(image.size), "expected_size": [expected[1], expected[0]]}}
 
 
+def scenario_hybrid_passes(out):
+    """hud-direct against a uniform 1000 cd/m^2 World, rendered with the hybrid method into a
+    multilayer EXR: one pass per channel."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    scene.world.hud.kind, scene.world.hud.luminance = "uniform", 1000.0
+    scene.hud.method, scene.hud.budget, scene.hud.rays, scene.hud.seed = "hybrid", "RAYS", 3_000_000, 2
+    scene.render.resolution_percentage = 50
+    s = scene.render.image_settings
+    s.file_format, s.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(Path(out) / "hybrid.exr")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    report = dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
+    disable(module)
+    return {"channels": {k: v.get("method") for k, v in report["method_details"]["channels"].items()}}
+
+
+def scenario_study_preset(out, preset):
+    """A study preset (a HUD against a real panorama) added in Blender and rendered as built (its
+    method, its eye): the passes and what the report says of the pupil and the channels."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset=preset)
+    scene = bpy.context.scene
+    method, pupil = scene.hud.method, scene.camera.data.hud.pupil
+    scene.hud.budget, scene.hud.rays, scene.hud.seed = "RAYS", 4_000_000, 1
+    s = scene.render.image_settings
+    s.file_format, s.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(Path(out) / "study.exr")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    report = dict(sys.modules[f"{module}.hud_addon.engine"].LAST_RENDER)
+    disable(module)
+    return {"method": method, "pupil": pupil, "pupil_report": report["method_details"].get("pupil"),
+            "channels": {k: v.get("method") for k, v in report["method_details"]["channels"].items()},
+            "adaptation_mode": report["adaptation_mode"]}
+
+
 def scenario_save_blend(path, preset):
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     bpy.ops.hud.add_preset(preset=preset)

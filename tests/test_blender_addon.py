@@ -544,3 +544,28 @@ def test_a_sun_light_exports_as_the_environments_sun(tmp_path):
     assert m["black_f12"].startswith("light 'Sun': Color: ") and "black" in m["black_f12"], m["black_f12"]
     assert res["polls"] == {"sun": True, "other engine": False, "no light": False}
     assert f"Disk luminance {env.sun.luminance_cd_m2:.3g} cd/m²" in res["labels"]
+
+
+def test_the_hybrid_method_gives_one_render_pass_per_channel(tmp_path):
+    """Issue 12, item 1 (and issue 11, Build item 3): rendered with the hybrid method in Blender, the
+    Render Result has a HUD pass and an Environment pass, and Combined is their sum."""
+    res, _ = scenario("hybrid_passes", tmp_path)
+    assert res["channels"] == {"hud": "backward", "environment": "backward"}
+    ch = read_multilayer(tmp_path / "hybrid.exr")
+    for c in "RGB":
+        hud, env = ch[f"ViewLayer.HUD.{c}"], ch[f"ViewLayer.Environment.{c}"]
+        np.testing.assert_allclose(ch[f"ViewLayer.Combined.{c}"], hud + env, rtol=1e-5, atol=1e-3)
+    assert ch["ViewLayer.Environment.G"].max() > 500 and ch["ViewLayer.HUD.G"].max() > 5000
+
+
+def test_a_study_preset_renders_in_blender_with_its_channels_and_its_eye(tmp_path):
+    """Issue 12, Done when: hud-direct-env added with Add HUD Preset renders with the hybrid method (the
+    preset has a lit panorama), the pupil following the image and the mean adaptation, one pass per
+    channel in the Render Result."""
+    res, _ = scenario("study_preset", tmp_path, "hud-direct-env")
+    assert res["method"] == "hybrid" and res["pupil"] == "IMAGE" and res["adaptation_mode"] == "mean"
+    assert res["channels"] == {"hud": "backward", "environment": "backward"}
+    assert res["pupil_report"]["pupil_diameter_mm"] < 3.0  # a day: a small pupil
+    ch = read_multilayer(tmp_path / "study.exr")
+    np.testing.assert_allclose(ch["ViewLayer.Combined.G"], ch["ViewLayer.HUD.G"] + ch["ViewLayer.Environment.G"],
+                               rtol=1e-5, atol=1e-2)

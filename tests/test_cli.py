@@ -5,6 +5,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -272,3 +273,29 @@ def test_readouts_prints_the_reports_figures(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "tracer.cli", "readouts", str(tmp_path / "x.json")],
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "not a hud-trace report" in bad.stderr
+
+
+def test_workers_refuse_a_scene_folder_that_changed_since_the_render_began(preset):
+    """Workers load the scene from its folder: one edited after the render began (here in the parent's
+    memory, as a script might) would render another scene in them; the render stops and says so."""
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("analytic-mirror")
+    integrator = INTEGRATORS["backward"](load_scene(folder), 1)
+    edit_json(folder, lambda d: d["eye"].update(pupil_diameter_mm=3.0))
+    with pytest.raises(RuntimeError, match="another scene than the one the render began with"):
+        render_parallel(integrator, Budget(rays=100_000), workers=2)
+
+
+def test_external_files_are_allowed_in_the_workers_too(preset, tmp_path):
+    """--allow-external-files with two workers: the workers load the folder with the same rule."""
+    from tracer.cli import main
+
+    folder = preset("analytic-mirror")
+    outside = tmp_path / "meshes-outside"
+    (folder / "meshes").rename(outside)
+    edit_json(folder, lambda d: [o.update(mesh=str(outside / Path(o["mesh"]).name)) for o in d["objects"]])
+    assert main(["render", str(folder), "--rays", "200000", "--workers", "2", "--out", str(tmp_path / "o"),
+                 "--quiet", "--allow-external-files"]) == 0

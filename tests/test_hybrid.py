@@ -153,3 +153,28 @@ def test_adaptation_luminance_is_the_log_average_or_the_mean_of_the_lit_pixels()
     assert adaptation_luminance(y, "mean") == pytest.approx(370.0)
     assert adaptation_luminance(y, "log_average") == pytest.approx(100.0, rel=1e-5)  # exp(mean(ln L))
     assert math.isclose(adaptation_luminance(np.zeros((2, 2)), "mean"), 0.0)
+
+
+def test_the_study_presets_are_calibrated_as_their_docstrings_say(tmp_path):
+    """hud-screen-day and hud-direct-env: the panorama scaled so that what the eye sees of it averages
+    the paper's 2140 cd/m^2; hud-screen-night: the panorama's minimum the paper's 34 cd/m^2; all three
+    with a black dashboard, the pupil following the image's mean, and the LEDs set for the study's
+    symbols (1600 cd/m^2 by day: 0.16 of hud-screen's)."""
+    pytest.importorskip("bpy")  # the panoramas ship inside the bpy package (presets/hdri.py)
+    from presets import PRESETS, hud_screen
+    from presets.studies import view_mean
+
+    for name, check in (("hud-screen-day", "view"), ("hud-direct-env", "view"), ("hud-screen-night", "min")):
+        folder = PRESETS[name].write(tmp_path / name)
+        scene = load_scene(folder)
+        env = scene.environment
+        if check == "view":
+            texture = folder / scene.raw["environment"]["file"]
+            assert env.scale_factor * view_mean(folder, texture, env.rotation_deg) == pytest.approx(2140.0, rel=1e-9)
+        else:
+            assert env.min_luminance == pytest.approx(34.0, rel=1e-12)
+        assert scene.eye.pupil_from_image and scene.eye.adaptation == "mean"
+        assert {o.name for o in scene.objects} >= {"dashboard_0", "well_floor"}
+    day = load_scene(tmp_path / "hud-screen-day")
+    led = next(o for o in day.objects if o.emission is not None)
+    assert led.emission.luminance == pytest.approx(0.16 * hud_screen.LED_LUMINANCE)

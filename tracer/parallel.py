@@ -74,11 +74,14 @@ def _await_workers(pool, ready, workers: int):
         started += 1
 
 
-def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, ready):
+def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, scene_hash: str,
+                 allow_external: bool, ready):
     """A worker's start: its own world (the scene folder's, seen by the parent's eye ``eye``, the fields
     of an EyeSpec: a pupil that follows the image was chosen there), the integrator of ``method`` with
-    the parent's ``options`` (what its prepare decided), and the roulette's pilot. Arguments are plain
-    data: inside Blender nothing of the tracer can be unpickled before tracer/worker_bootstrap.py ran."""
+    the parent's ``options`` (what its prepare decided), and the roulette's pilot. The folder must still
+    hold the parent's scene (``scene_hash``): one edited since, on disk or in the parent's memory, would
+    render another scene in the workers. Arguments are plain data: inside Blender nothing of the tracer
+    can be unpickled before tracer/worker_bootstrap.py ran."""
     # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP reaches the whole process group,
     # and a worker must not die of it mid-batch with a traceback. SIGTERM keeps its default (a quiet
     # exit): the pool ends its workers with it.
@@ -87,7 +90,10 @@ def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, option
             signal.signal(getattr(signal, name), signal.SIG_IGN)
     keep_freed_memory()  # a worker process exists to trace
     try:
-        scene = load_scene(scene_dir)
+        scene = load_scene(scene_dir, allow_external=allow_external)
+        if scene.scene_hash != scene_hash:
+            raise RuntimeError(f"{scene_dir} holds another scene than the one the render began with (changed on disk "
+                               "since, or edited in memory: workers load the folder)")
         integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
         integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
     except Exception as e:  # noqa: BLE001 - told to the parent, which stops the pool (a raise would respawn us)
@@ -209,7 +215,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     ctx.set_executable(executable)
     ready = ctx.Queue()
     initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
-                                          local.worker_options(), dataclasses.asdict(local.eye.spec), ready))
+                                          local.worker_options(), dataclasses.asdict(local.eye.spec),
+                                          local.scene.scene_hash, local.scene.allow_external, ready))
     t0 = time.perf_counter()
     with _main_hidden():
         pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)

@@ -203,6 +203,9 @@ class Scene:
     scene_hash: str
     raw: dict
     file: str = SCENE_FILE
+    #: Whether the scene's files may lie outside its folder (load_scene's ``allow_external``): worker
+    #: processes load the folder again with the same rule.
+    allow_external: bool = False
 
     def object(self, name: str) -> SceneObject:
         for obj in self.objects:
@@ -617,6 +620,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     env_file = raw.get("environment", {}).get("file") if isinstance(raw.get("environment"), dict) else None
     if isinstance(env_file, str):
         files.append(env_file)
-    scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname)
+    scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname,
+                  allow_external)
     scene.methods = _methods(ck, raw, scene)
     return scene

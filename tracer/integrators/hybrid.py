@@ -180,10 +180,14 @@ def median_relative_variance(images: list[np.ndarray], variances: list[np.ndarra
 
 
 def pilot_batch_size(method: str, pixels: int) -> int:
-    """A pilot's batch: PILOT_BATCH paths, for the backward method a whole number of passes over the
-    pixels (its batches trace one sample per pixel per pass)."""
+    """A pilot's batch: PILOT_BATCH paths; for the backward method a whole number of passes over the
+    pixels (its batches trace one sample per pixel per pass); for the photon method its default batch
+    (an eye pass per batch costs the same whatever its photons: a small batch would misstate what a
+    photon costs and is worth)."""
     if method == "backward":
         return max(SMALLEST_BATCH, pixels * max(1, round(PILOT_BATCH / pixels)))
+    if method == "photon":
+        return DEFAULT_BATCH
     return PILOT_BATCH
 
 
@@ -337,20 +341,27 @@ class _Channels(Integrator):
         """(paths per batch, every how many batches) of each channel (module docstring, Budget).
 
         One channel: the method's own batch (None: its default, or sized to a time budget), every batch.
-        Several: n_c ~ sqrt(w_c / t_c) units of work per hybrid batch (w_c the pilot's variance times its
-        units, t_c its cost per unit), which minimises the summed image's variance for the batch's cost;
-        that cost is a default batch of the costliest channel, or a share of a time budget. A channel
-        whose n_c is below its smallest batch (a backward batch covers every pixel once) takes part in
-        every m-th hybrid batch only, with m = smallest batch / n_c."""
+        Several: n_c ~ sqrt(w_c / t_c) units of work per hybrid batch, which minimises the summed image's
+        relative variance for the batch's cost: w_c = sum over pixels of the channel's pilot variance
+        times its units, over the square of the pixel's summed luminance (so that a bright sky does not
+        starve the HUD's symbols), t_c the cost per unit. The hybrid batch costs a default batch of the
+        costliest channel, or a share of a time budget. A channel whose n_c is below its smallest batch
+        (a backward batch covers every pixel once; a photon batch keeps its default size, for which its
+        gather radius shrinks batch by batch) takes part in every m-th hybrid batch only, m = smallest
+        batch / n_c; every channel keeps at least MIN_CHANNEL_BATCHES of the render's expected batches
+        (its variance comes from the spread of its replicates)."""
         own = {c.name: ((None if self.auto_batch else self.batch_size), 1) for c in live}
         if len(live) <= 1:
             return own
         pilot = {c.name: next((p for p in c.pilots if p.method == c.chosen and p.skipped is None), None) for c in live}
         if any(p is None or p.cost <= 0 or p.units <= 0 for p in pilot.values()):
             return own
+        total = sum(p.image for p in pilot.values())
+        weight = np.divide(1.0, total * total, out=np.zeros_like(total), where=total > 0)
         t = {k: p.cost / p.units for k, p in pilot.items()}
-        n = {k: math.sqrt(max(p.variance_units, 1e-300) / t[k]) for k, p in pilot.items()}
-        target = max(t[k] * DEFAULT_BATCH for k in pilot)
+        w = {k: float((p.variance * weight).sum()) * p.units for k, p in pilot.items()}
+        n = {k: math.sqrt(max(w[k], 1e-300) / t[k]) for k in pilot}
+        target = max(t.values()) * DEFAULT_BATCH
         if budget.rays is None:
             target = min(target, BATCH_SHARE_OF_TIME * budget.seconds)
         scale = target / sum(n[k] * t[k] for k in n)
@@ -358,13 +369,11 @@ class _Channels(Integrator):
         out = {}
         for c in live:
             want = n[c.name] * scale
-            smallest = max(SMALLEST_BATCH, pixels if c.chosen == "backward" else 0)
-            if want >= smallest:
+            smallest = {"backward": max(SMALLEST_BATCH, pixels), "photon": DEFAULT_BATCH}.get(c.chosen, SMALLEST_BATCH)
+            if c.chosen != "photon" and want >= smallest:
                 out[c.name] = (int(min(MAX_BATCH, round(want))), 1)
             else:
                 out[c.name] = (smallest, max(1, round(smallest / max(want, 1e-9))))
-        # Every channel keeps MIN_CHANNEL_BATCHES batches of the render's expected number (its variance
-        # comes from the spread of its replicates).
         left = (budget.rays if budget.rays is not None else budget.seconds) * (1 - float(self.opts["pilot_share"]))
         per_batch = sum(b * t[k] / every for k, (b, every) in out.items())
         cap = max(1, int(left / max(per_batch, 1e-300)) // MIN_CHANNEL_BATCHES)
