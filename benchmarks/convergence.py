@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.throughput import VARIANTS, make  # noqa: E402
-from presets import PRESETS  # noqa: E402
+from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
@@ -306,7 +306,7 @@ def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -
 def main():
     keep_freed_memory()  # as the command line does (tracer/allocator.py)
     ap = argparse.ArgumentParser()
-    ap.add_argument("--presets", nargs="*", default=list(PRESETS))
+    ap.add_argument("--presets", nargs="*", default=list(SINGLE_METHOD))
     ap.add_argument("--budgets", type=float, nargs="*", default=[1, 2, 4, 8, 16])
     ap.add_argument("--ref-seconds", type=float, default=120.0)
     ap.add_argument("--workers", type=int, default=2)
@@ -317,7 +317,7 @@ def main():
         rows = measure(name, folder, ref, args.budgets)
         write_rows(name, rows)
         chart(name, rows, ref)
-    print(write_summary(list(PRESETS), max(args.budgets)))
+    print(write_summary(list(SINGLE_METHOD), max(args.budgets)))
 
 
 if __name__ == "__main__":

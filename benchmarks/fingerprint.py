@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.throughput import VARIANTS, make  # noqa: E402
-from presets import PRESETS  # noqa: E402
+from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
@@ -33,7 +33,8 @@ from tracer.world import World  # noqa: E402
 def fingerprints(rays: int, seed: int) -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for name, preset in PRESETS.items():
+        for name in SINGLE_METHOD:
+            preset = PRESETS[name]
             world = World(load_scene(preset.write(Path(tmp) / name)))
             for variant in VARIANTS:
                 res = make(world, variant, seed).render(Budget(rays=rays))

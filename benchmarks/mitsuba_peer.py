@@ -48,7 +48,7 @@ import mitsuba as mi  # noqa: E402
 from benchmarks import convergence as cv  # noqa: E402
 from benchmarks import mitsuba_scene as ms  # noqa: E402
 from benchmarks.mitsuba_checks import run_checks  # noqa: E402
-from presets import PRESETS  # noqa: E402
+from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.optics.bsdf import DELTA  # noqa: E402
 from tracer.optics.materials import MATERIALS  # noqa: E402
 from tracer.scene import Scene, load_scene  # noqa: E402
@@ -199,7 +199,7 @@ def section(info: list[dict], checks: list[str], budget: float) -> str:
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--presets", nargs="*", default=list(PRESETS))
+    ap.add_argument("--presets", nargs="*", default=list(SINGLE_METHOD))
     ap.add_argument("--budgets", type=float, nargs="*", default=[1, 2, 4, 8, 16])
     ap.add_argument("--ref-seconds", type=float, default=120.0)
     ap.add_argument("--workers", type=int, default=2, help="processes for a reference not in the cache")
@@ -218,7 +218,7 @@ def main():
         cv.write_rows(name, ours + rows)
         cv.chart(name, cv.read_rows(name), ref)
     checks = run_checks()
-    print(cv.write_summary(list(PRESETS), max(args.budgets), [section(info, checks, max(args.budgets))]))
+    print(cv.write_summary(list(SINGLE_METHOD), max(args.budgets), [section(info, checks, max(args.budgets))]))
 
 
 if __name__ == "__main__":

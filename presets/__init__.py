@@ -19,3 +19,9 @@ from . import (
 
 PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_screen_ideal, hud_direct_condenser, hud_screen_day,
                                hud_screen_night, hud_direct_env, analytic_mirror, analytic_disk, analytic_furnace)}
+#: The studies of a HUD against a panorama (presets/studies.py): the hybrid method's scenes. The
+#: single-method benchmarks (speed against accuracy, Mitsuba, fingerprints) leave them out: forward
+#: tracing and Mitsuba's converter do not render their environment channel as the hybrid does.
+STUDIES = tuple(m.NAME for m in (hud_screen_day, hud_screen_night, hud_direct_env))
+#: Every preset but the studies.
+SINGLE_METHOD = tuple(n for n in PRESETS if n not in STUDIES)

@@ -1,7 +1,6 @@
-"""Light-transport methods, found by name: ``INTEGRATORS["forward"]``, ``INTEGRATORS["backward"]``.
-
-Later methods (photon maps, the hybrid) register themselves the same way and appear in the
-command line and the Blender add-on without changes there.
+"""Light-transport methods, found by name: ``INTEGRATORS["forward"]``, ``INTEGRATORS["backward"]``,
+``"photon"``, ``"hybrid"``, ``"auto"``. A method registers itself and appears in the command line and
+the Blender add-on without changes there.
 """
 
 from ..film import Film
@@ -9,8 +8,9 @@ from . import backward, forward, hybrid, photon  # noqa: F401  (registration)
 from .base import DEFAULT_BATCH, INTEGRATORS, Budget, Integrator, RenderResult
 
 #: The method used when none is named: backward tracing with next-event estimation, the most
-#: time-efficient on every preset (README, "Speed against accuracy"). The automatic choice of a method
-#: per scene (a later issue) replaces this constant.
+#: time-efficient where the scattering surfaces see the LEDs directly (README, "Speed against
+#: accuracy"), with no pilot to pay for. "auto" chooses per scene and "hybrid" per channel, by pilots
+#: of a few seconds (tracer/integrators/hybrid.py).
 DEFAULT_METHOD = "backward"
 
 __all__ = ["DEFAULT_BATCH", "DEFAULT_METHOD", "INTEGRATORS", "Budget", "Film", "Integrator", "RenderResult"]
