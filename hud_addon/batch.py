@@ -8,7 +8,8 @@ overridden where options are given, and Blender's own render pipeline runs (the 
 DIR receives image.exr (multilayer: Combined, the luminance pass Y and its standard error Y_noise,
 cd/m^2, with the hud:* header fields of the command line's image.exr), report.json (the command
 line's report, tracer.render.build_report, with the .blend's path) and falsecolour.png (Y in false
-colour, logarithmic, with a legend in cd/m^2: tracer.falsecolour), written as a set (tracer.outputs, as hud-trace writes its outputs): DIR and the arguments are checked
+colour, logarithmic, with a legend in cd/m^2: tracer.falsecolour), written as a set (tracer.outputs,
+as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
 the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
 kept). The report's ``run_id`` names the set. This module imports nothing from the package at import

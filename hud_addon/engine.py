@@ -177,7 +177,8 @@ def write_beside(scene, *_):
     f = png_file(colour_path.name, FALSE_COLOUR[scene.name][0])
     write_as_set(colour_path, f.write, f.check)
     text = finite_json(report | {"image_file": str(written)})
-    write_as_set(report_path, lambda p: Path(p).write_text(text), lambda p: finite_json(json.loads(Path(p).read_text())))
+    write_as_set(report_path, lambda p: Path(p).write_text(text),
+                 lambda p: finite_json(json.loads(Path(p).read_text())))
 
 
 class HudRenderEngine(bpy.types.RenderEngine):

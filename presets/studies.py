@@ -74,7 +74,8 @@ def dashboard() -> list[tuple[str, np.ndarray, np.ndarray, dict]]:
     (y0, y1), x = DASH_Y, DASH_HALF_X
     black = {"type": "absorber"}
     out = []
-    for k, (a0, a1, b0, b1) in enumerate([(-x, hx0, y0, y1), (hx1, x, y0, y1), (hx0, hx1, y0, hy0), (hx0, hx1, hy1, y1)]):
+    panels = [(-x, hx0, y0, y1), (hx1, x, y0, y1), (hx0, hx1, y0, hy0), (hx0, hx1, hy1, y1)]
+    for k, (a0, a1, b0, b1) in enumerate(panels):
         out.append((*_panel(f"dashboard_{k}", np.array([a0, b0, DASH_HEIGHT]), np.array([a1 - a0, 0, 0]),
                             np.array([0, b1 - b0, 0])), black))
     hx, y0, y1, z0 = WELL

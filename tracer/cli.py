@@ -144,7 +144,7 @@ def _write_errors(e: BaseException, out) -> int:
     the errors it ends with: the folder cannot take the set, or a value overflows (2); the writing
     failed (4: the folder keeps its earlier set); a second Ctrl-C (5); other I/O, such as a preset's
     temporary scene folder on a full disk (4)."""
-    from .outputs import OutputFolderError, OutputWriteError
+    from .outputs import OutputFolderError
 
     if isinstance(e, OutputFolderError | EstimateOverflowError):
         print(f"error: {e}", file=sys.stderr)

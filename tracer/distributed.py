@@ -20,10 +20,10 @@ import time
 import zipfile
 from pathlib import Path
 
+from .eye import ThinLensEye
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
 from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
-from .eye import ThinLensEye
 from .scene import EyeSpec, load_scene
 from .world import World
 

@@ -4,8 +4,9 @@ also runs inside Blender, which has neither).
 
 - Scale: t = (log10 Y - log10 lo) / (log10 hi - log10 lo), clamped to [0, 1], through the viridis
   colour map (:data:`VIRIDIS`), whose luminance increases monotonically along it (to within the
-  8-bit rounding of one channel), so brighter always reads brighter. The default range runs from the decade at or below the 1st percentile of
-  the lit pixels (Y > 0) to the decade at or above the maximum, at most :data:`MAX_DECADES`
+  8-bit rounding of one channel), so brighter always reads brighter. The default range runs from
+  the decade at or below the 1st percentile of the lit pixels (Y > 0) to the decade at or above the
+  maximum, at most :data:`MAX_DECADES`
   decades (the top ones are kept: a HUD's symbols and its black leak, not the faint stray light
   below them). Pixels at or below 0 cd/m^2 (no light) are black, which the colour map never
   reaches; pixels outside the range take the colour of its end, and the legend says so with a

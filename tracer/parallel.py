@@ -40,9 +40,9 @@ from pathlib import Path
 import numpy as np
 
 from .allocator import keep_freed_memory
+from .eye import ThinLensEye
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
-from .eye import ThinLensEye
 from .scene import EyeSpec, load_scene
 from .world import World
 

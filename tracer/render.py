@@ -11,10 +11,10 @@ as one set, each read back before it replaces its older version: tracer.outputs)
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
-import dataclasses
 import uuid
 from dataclasses import dataclass
 from pathlib import Path

@@ -412,7 +412,8 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
-            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age", "adaptation"})
+            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age",
+             "adaptation"})
     pos = ck.position(spec["position"], "eye.position")
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")

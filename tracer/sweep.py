@@ -514,7 +514,7 @@ def plan_sweep(folder, fields: list[SweepField], requirements: list[Requirement]
     fields = [f.resolve(base) for f in fields]
     seen: dict[tuple, SweepField] = {}
     for f in fields:
-        for path, removed in f.targets:
+        for path, _removed in f.targets:
             if path in seen:
                 raise SweepArgumentError(f.argument, f"{path_text(path)} is set by {seen[path].argument} too")
             seen[path] = f

@@ -307,7 +307,8 @@ class _Channels(Integrator):
         for c in live:
             c.pilots = [Pilot(m, why) for m, why in c.candidates.items() if why is not None and c.asked == "auto"]
             for m in trials[c.name]:
-                integ = self._make(c, m, self._seed(c, pilot=True), pilot_batch_size(m, self.eye.width * self.eye.height))
+                size = pilot_batch_size(m, self.eye.width * self.eye.height)
+                integ = self._make(c, m, self._seed(c, pilot=True), size)
                 c.pilots.append(run_pilot(integ, m, seconds, rays, in_rays))
                 spent_rays += c.pilots[-1].rays
             ran = [p for p in c.pilots if p.skipped is None]
@@ -319,7 +320,8 @@ class _Channels(Integrator):
             if c.chosen is None:
                 best = max(ran, key=lambda p: p.efficiency)
                 if best.efficiency <= 0:
-                    c.skipped = "no pilot found light (" + ", ".join(f"{p.method}: {p.paths:,} paths" for p in ran) + ")"
+                    tried = ", ".join(f"{p.method}: {p.paths:,} paths" for p in ran)
+                    c.skipped = f"no pilot found light ({tried})"
                     continue
                 c.chosen, c.chosen_by = best.method, "given" if c.asked != "auto" else "pilots"
         live = [c for c in live if c.skipped is None]
