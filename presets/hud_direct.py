@@ -135,7 +135,12 @@ def condenser_layout() -> dict:
 
 
 def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: bool = False, name: str = NAME,
-          summary: str = SUMMARY) -> Path:
+          summary: str = SUMMARY, lcd_polariser_deg: float | None = None, film_axis_deg: float | None = None,
+          analyser: dict | None = None) -> Path:
+    """The scene folder. ``lcd_polariser_deg``: the LCD's output polariser axis (degrees from its local
+    x, which is the world x: 0 gives light that the mirror and the windshield see as s light);
+    ``film_axis_deg``: a half-wave retarder film 1 mm in front of the LCD with its fast axis at that
+    angle; ``analyser``: the eye's analyser block (polarised sunglasses), presets/hud_direct_polarised.py."""
     d = design()
     sb = SceneBuilder(Path(folder), name, summary)
     x_axis = np.array([1.0, 0.0, 0.0])
@@ -154,8 +159,13 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
     slide_image(sb.folder / img_rel)
     lcd_v, lcd_f, lcd_uv = rectangle(w_lcd, h_lcd)
     lcd_frame = frame_matrix(d["lcd_center"], x_axis, -r2)
-    sb.add("lcd", (lcd_v, lcd_f), {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE,
-                                   "contrast_ratio": CONTRAST}, lcd_frame, uv=lcd_uv)
+    lcd_material = {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE, "contrast_ratio": CONTRAST}
+    if lcd_polariser_deg is not None:
+        lcd_material["polariser"] = {"axis_deg": lcd_polariser_deg}
+    sb.add("lcd", (lcd_v, lcd_f), lcd_material, lcd_frame, uv=lcd_uv)
+    if film_axis_deg is not None:
+        sb.add("half_wave_film", rectangle(w_lcd + 2, h_lcd + 2)[:2], {"type": "retarder", "axis_deg": film_axis_deg},
+               frame_matrix(d["lcd_center"] - 1.0 * r2, x_axis, -r2))
     # Opaque frame around the LCD (four bars) so no unmodulated light passes beside it.
     frame_bars(sb, "lcd_frame", (w_lcd, h_lcd), 30.0, lcd_frame)
     # Raster scatterer 3 mm behind the LCD, a little larger than it.
@@ -206,9 +216,12 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
     hv, hf, _ = rectangle(60.0, 40.0)
     sb.add("led_board", (hv, hf), {"type": "absorber"}, frame_matrix(led_center + 1.0 * r2, x_axis, -r2))
     eye = d["eye"]
+    eye_block = {"position": eye.tolist(), "gaze": d["gaze"].tolist(), "up": [0.0, 0.0, 1.0],
+                 "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67, "accommodation_distance_mm": VID,
+                 "resolution": list(resolution), "fov_deg": list(VIEW_DEG)}
+    if analyser is not None:
+        eye_block["analyser"] = dict(analyser)
     return sb.write(
-        eye={"position": eye.tolist(), "gaze": d["gaze"].tolist(), "up": [0.0, 0.0, 1.0],
-             "pupil_diameter_mm": pupil_mm, "focal_length_mm": 16.67, "accommodation_distance_mm": VID,
-             "resolution": list(resolution), "fov_deg": list(VIEW_DEG)},
+        eye=eye_block,
         methods={"forward": {"max_depth": 24}, "backward": {"max_depth": 24}},
     )

@@ -255,8 +255,9 @@ def test_roulette_reference_comes_from_a_pilot_that_every_process_repeats(tmp_pa
 def _plate(folder):
     """A 4.76 mm glass plate met at 67 deg (a windshield) reflecting a large Lambertian panel into the
     eye: the panel reads L (R + T^2 R / (1 - R^2)), the plate's incoherent reflectance (the symbol
-    image and all its ghosts), with R the unpolarised Fresnel reflectance at 67 deg (the field is
-    0.1 deg, over which R varies by 0.1 %)."""
+    image and all its ghosts), for s and for p light, and the mean of the two for the panel's
+    unpolarised light (s and p cross the plate as separate channels; tests/test_polarisation.py), with
+    R the Fresnel reflectance at 67 deg (the field is 0.1 deg, over which R varies by 0.1 %)."""
     sb = SceneBuilder(folder, "plate", "a glass plate reflecting a panel")
     theta = math.radians(67.0)
     normal = [0.0, -math.cos(theta), math.sin(theta)]  # the eye looks along +y and meets the plate at 67 deg
@@ -274,11 +275,11 @@ def test_specular_splits_move_noise_not_answer(tmp_path):
     """Splitting at the plate's surfaces (methods.backward.splits) and choosing a branch by Fresnel
     probability estimate the same closed form; splitting removes the choice's noise (several times
     smaller error for the same rays)."""
-    from tracer.optics.fresnel import fresnel_unpolarized
+    from tracer.optics.polar import amplitudes
 
     world = World(load_scene(_plate(tmp_path / "p")))
-    r = float(fresnel_unpolarized(np.array([math.cos(math.radians(67.0))]), 1.52)[0][0])
-    expected = 1000.0 * (r + (1 - r) ** 2 * r / (1 - r * r))
+    rs, rp, _, _ = amplitudes(np.array([math.cos(math.radians(67.0))]), 1.52)
+    expected = 1000.0 * np.mean([r + (1 - r) ** 2 * r / (1 - r * r) for r in (abs(rs[0]) ** 2, abs(rp[0]) ** 2)])
     se = {}
     for splits in (0, 3):
         opts = dict(world.scene.method_options("backward")) | {"splits": splits}

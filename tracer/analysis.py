@@ -132,7 +132,10 @@ class ChiefRays(PathMethod):
 
     def emitted(self, state, tri, p, t, ctx):
         lights = self.world.lights
-        self._leaf(state, *self._by_object(lights.slot[tri]), state.beta * lights.emitted(tri, state.d))
+        beta = state.beta
+        if self.world.polar is not None:
+            beta = self.world.polar.emitted(beta, state.extra, state.d, lights.slot[tri])
+        self._leaf(state, *self._by_object(lights.slot[tri]), beta * lights.emitted(tri, state.d))
 
     def connect(self, state, it, bsdf, ctx):
         """A scattering surface ends the chain: its luminance toward the eye from the lights in direct
@@ -191,8 +194,13 @@ class ChiefRays(PathMethod):
         rel = None
         if isinstance(bsdf, LCD):
             rel = luminance3(bsdf.modulation(it))
-        for wo, weight, _flags, label in bsdf.lobes(it, RADIANCE):
-            beta = state.beta * weight
+        polar = self.world.polar
+        for wo, weight, flags, label in bsdf.lobes(it, RADIANCE):
+            if polar is not None:  # s and p (the Stokes row vector) followed through the chain
+                beta, stokes, frame = polar.scatter(state.beta, state.extra, it, bsdf, wo, weight,
+                                                    np.full(len(it), flags, np.int8), False)
+            else:
+                beta = state.beta * weight
             keep = np.flatnonzero(ctx.roulette.keep(luminance3(beta) * self.max_lum))
             if len(keep) == 0:
                 continue
@@ -202,8 +210,11 @@ class ChiefRays(PathMethod):
             sig = self._code(state.extra["sig"][keep], [f"{nm}:{label}" for nm in names], which[keep])
             w_k = np.take(wo, keep, axis=1)
             o = ctx.world.accel.spawn(np.take(it.p, keep, axis=1), np.take(it.ng, keep, axis=1), w_k, it.offset[keep])
+            extra = {"sig": sig, "lcd": lcd[keep]}
+            if polar is not None:
+                extra |= {"stokes": np.take(stokes, keep, axis=-1), "frame": np.take(frame, keep, axis=1)}
             out.append(PathState(o, w_k, np.take(beta, keep, axis=1), state.owner[keep], state.rep[keep],
-                                 np.zeros(len(keep)), np.ones(len(keep), bool), {"sig": sig, "lcd": lcd[keep]}))
+                                 np.zeros(len(keep)), np.ones(len(keep), bool), extra))
         return out
 
 
@@ -263,9 +274,13 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     samples = pupil_grid * pupil_grid if lens is not None else 1
     n = d.shape[1]
     method = ChiefRays(world, environment=environment)
-    state = PathState(o, d.astype(F32), np.ones((3, n), F32), np.arange(n), np.zeros(n, np.int64), np.zeros(n, F32),
-                      np.ones(n, bool),
-                      {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)})
+    beta = np.ones((3, n), F32)
+    extra = {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)}
+    if world.polar is not None:  # the eye's detector row (and analyser): s and p followed separately
+        beta, pol = world.polar.start_camera(beta, d.astype(F32))
+        extra |= pol
+    state = PathState(o, d.astype(F32), beta, np.arange(n), np.zeros(n, np.int64), np.zeros(n, F32),
+                      np.ones(n, bool), extra)
     ctx = Context(world, make_rng(0), Timers(), Splats(), Roulette(MIN_FACTOR / Roulette.EPSILON * method.max_lum))
     trace(method, state, ctx, max_depth)
     paths = []

@@ -57,7 +57,14 @@ EMISSION = Schema(
            description="Luminous flux of the whole object, lm (give this or the luminance)", ui_default=1.0),
      Field("color", "rgb", [1.0, 1.0, 1.0], unit="1", minimum=0.0, maximum=1e6, label="Color",
            description="Linear Rec.709 colour; scaled so that its luminance is the given one"),
-     Field("two_sided", "bool", False, label="Two-sided", description="Emit from both sides")),
+     Field("two_sided", "bool", False, label="Two-sided", description="Emit from both sides"),
+     Field("polarisation", "group", None, label="Polarisation",
+           description="Linearly polarised emission (an LCD panel, a polarised LED source)",
+           fields=(Field("axis_deg", "number", unit="deg", minimum=-360.0, maximum=360.0, label="Axis",
+                         description="Polarisation axis, degrees from the object's local x axis toward its local y "
+                                     "axis", ui_default=0.0),
+                   Field("degree", "number", 1.0, unit="1", minimum=0.0, maximum=1.0, label="Degree",
+                         description="Degree of linear polarisation, 0 (unpolarised) to 1")))),
     can_aim=True, alternatives=(("luminance",), ("flux",)), check=_emission_check)
 
 
@@ -71,6 +78,12 @@ class Emission:
     two_sided: bool
     aim: object = None
     params: dict | None = None
+
+    @property
+    def polarisation(self) -> dict | None:
+        """{"axis_deg", "degree"} of linearly polarised emission, or None (unpolarised)."""
+        pol = (self.params or {}).get("polarisation")
+        return pol if pol is not None and pol["degree"] > 0 else None
 
     @property
     def radiance(self) -> np.ndarray:

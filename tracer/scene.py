@@ -71,7 +71,7 @@ from .errors import SceneError
 from .lights import EMISSION, Emission, make_emission
 from .optics.materials import MATERIALS
 from .pupil import pupil_diameter_mm
-from .schema import fail_in, parse_block
+from .schema import Field, fail_in, parse_block
 from .validate import (
     BYTES_PER_PIXEL,
     MAX_COORD_MM,
@@ -133,6 +133,8 @@ class SceneObject:
     normals : (v, 3) float64 unit vertex normals when ``smooth`` else None.
     uv : (v, 2) float64 texture coordinates or None.
     local_x : (3,) the object's local x axis in the world (anisotropic lobes follow it).
+    local_y : (3,) its local y axis, made perpendicular to local_x (polariser and retarder axes are
+    angles from local_x toward local_y).
     """
 
     name: str
@@ -145,6 +147,13 @@ class SceneObject:
     uv: np.ndarray | None = None
     local_x: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     emission: Emission | None = None
+    local_y: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+
+    def axis(self, angle_deg: float) -> np.ndarray:
+        """(3,) unit vector at ``angle_deg`` from the local x axis toward the local y axis (the axis of a
+        polariser, a retarder film or a polarised emitter on this object)."""
+        a = np.radians(angle_deg)
+        return np.cos(a) * self.local_x + np.sin(a) * self.local_y
 
     @property
     def slot(self) -> int:
@@ -167,6 +176,23 @@ ADAPTATION_MODES = ("log_average", "mean")
 FIRST_GUESS_CD_M2 = 100.0
 
 
+#: The eye's optional analyser, ``eye.analyser``: polarised sunglasses (a linear polariser before the eye).
+ANALYSER = Field(
+    "analyser", "group", None, label="Analyser (polarised sunglasses)",
+    description="A linear polariser in front of the eye, as polarised sunglasses are",
+    fields=(Field("axis_deg", "number", 90.0, unit="deg", minimum=-360.0, maximum=360.0, label="Axis",
+                  description="Transmission axis, degrees from the eye's right toward its up (sunglasses: 90)"),
+            Field("transmittance_along", "number", 1.0, unit="1", minimum=0.0, maximum=1.0, label="Transmittance along",
+                  description="Transmittance for light polarised along the axis, 0..1"),
+            Field("transmittance_across", "number", 0.0, unit="1", minimum=0.0, maximum=1.0,
+                  label="Transmittance across", description="Transmittance for light polarised across the axis, 0..1")))
+
+#: ``polarisation`` at the top of scene.json: "auto" carries Stokes vectors where an element of the
+#: scene polarises (tracer.optics.polar); "off" uses the unpolarised Fresnel average at dielectrics
+#: (what an RGB renderer does) and refuses elements that only mean something with polarisation.
+POLARISATION_MODES = ("auto", "off")
+
+
 @dataclass
 class EyeSpec:
     """The observer: a thin-lens eye (see :mod:`tracer.eye`). Lengths in mm, angles in degrees."""
@@ -186,6 +212,8 @@ class EyeSpec:
     #: adaptation_luminance_cd_m2 "image"): a pilot render finds it (tracer.render.run_render).
     pupil_from_image: bool = False
     observer_age: float = 30.0
+    #: The analyser in front of the eye (:data:`ANALYSER`'s parsed fields), or None.
+    analyser: dict | None = None
 
 
 @dataclass
@@ -206,6 +234,8 @@ class Scene:
     #: Whether the scene's files may lie outside its folder (load_scene's ``allow_external``): worker
     #: processes load the folder again with the same rule.
     allow_external: bool = False
+    #: :data:`POLARISATION_MODES`: "auto" (Stokes vectors where the scene polarises) or "off".
+    polarisation: str = "auto"
 
     def object(self, name: str) -> SceneObject:
         for obj in self.objects:
@@ -408,12 +438,47 @@ def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
     return h.hexdigest()[:16]
 
 
+def _polarisation(ck: FieldChecker, raw: dict, eye: EyeSpec, objects: list[SceneObject]) -> str:
+    """The scene's polarisation mode, after checking what needs it: with "off", no element may be one
+    that only polarisation can describe; LCD output polarisers are on every LCD or on none."""
+    mode = raw.get("polarisation", "auto")
+    if mode not in POLARISATION_MODES:
+        ck.fail("polarisation", f"expected one of {', '.join(json.dumps(m) for m in POLARISATION_MODES)}, got "
+                                f"{json.dumps(mode)[:40]}")
+    needs = []  # (field, what)
+    if eye.analyser is not None:
+        needs.append(("eye.analyser", "an analyser"))
+    lcds = []
+    for o in objects:
+        fld, p, t = f"objects[{o.index}].material", o.material.params, o.material.type
+        if t == "lcd":
+            lcds.append((o, p.get("polariser") is not None))
+        if t == "lcd" and p.get("polariser") is not None:
+            needs.append((f"{fld}.polariser", "an LCD output polariser"))
+        elif t == "retarder":
+            needs.append((f"{fld}.type", "a retarder film"))
+        elif t == "coating" and "reflectance_s" in p:
+            needs.append((f"{fld}.reflectance_s", "a coating given for s and p light"))
+        elif t == "mirror" and p.get("metal") is not None:
+            needs.append((f"{fld}.metal", "a metal mirror"))
+        if o.emission is not None and o.emission.polarisation is not None:
+            where = "emission" if "emission" in raw["objects"][o.index] else "material"
+            needs.append((f"objects[{o.index}].{where}.polarisation", "polarised emission"))
+    if mode == "off" and needs:
+        fld, what = needs[0]
+        ck.fail(fld, f'{what} needs polarisation: remove "polarisation": "off" (or this block)')
+    if lcds and 0 < sum(has for _, has in lcds) < len(lcds):
+        bare = next(o for o, has in lcds if not has)
+        ck.fail(f"objects[{bare.index}].material.polariser", "give every LCD of the scene an output polariser, or none")
+    return mode
+
+
 def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
     ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
             {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age",
-             "adaptation"})
+             "adaptation", "analyser"})
     pos = ck.position(spec["position"], "eye.position")
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")
@@ -466,8 +531,11 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
     if np.any(fov <= 0) or np.any(fov >= 170):
         ck.fail("eye.fov_deg", "each field angle must lie in (0, 170) degrees")
+    analyser = None
+    if spec.get("analyser") is not None:
+        analyser = parse_block(ck, spec["analyser"], "eye.analyser", ANALYSER.fields)
     return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])), adaptation,
-                   from_image, age)
+                   from_image, age, analyser)
 
 
 def _methods(ck: FieldChecker, raw: dict, scene: Scene) -> dict[str, dict]:
@@ -519,7 +587,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     ck = FieldChecker(fname, allow_external)
     ck.obj(raw, "")
     ck.keys(raw, "", {"format", "version", "eye", "objects"},
-            {"name", "description", "environment", "methods", "backward", "forward"})
+            {"name", "description", "environment", "methods", "backward", "forward", "polarisation"})
     if raw["format"] != FORMAT:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
     if raw["version"] != VERSION:
@@ -581,7 +649,10 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         if mat.type == "lcd" and uv is None:
             ck.fail(f"{fld}.mesh", f"{rel}: an LCD needs texture coordinates (an OBJ with vt lines)")
         lx = m[:3, :3] @ np.array([1.0, 0.0, 0.0])
-        obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx / np.linalg.norm(lx))
+        lx /= np.linalg.norm(lx)
+        ly = m[:3, :3] @ np.array([0.0, 1.0, 0.0])
+        ly -= (ly @ lx) * lx
+        obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx, local_y=ly / np.linalg.norm(ly))
         if emission is not None:
             obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
             if obj.emission.luminance > MAX_LUMINANCE:
@@ -612,6 +683,8 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         if sv[-1] > 1e-6 * max(sv[0], 1e-12):
             ck.fail(fld, f"aim target {json.dumps(target)} must be a planar mesh (a window, a lens aperture, the LCD)")
 
+    polarisation = _polarisation(ck, raw, eye, objects)
+
     name = raw.get("name", root.name)
     if not isinstance(name, str):
         ck.fail("name", "expected a string")
@@ -622,6 +695,6 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     if isinstance(env_file, str):
         files.append(env_file)
     scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname,
-                  allow_external)
+                  allow_external, polarisation)
     scene.methods = _methods(ck, raw, scene)
     return scene

@@ -21,6 +21,7 @@ from .lights import LightTable
 from .optics.aimed import Aimed
 from .optics.bsdf import Interaction
 from .optics.materials import make_materials
+from .optics.polar import Transport
 from .scene import EyeSpec, Scene
 from .units import luminance3
 
@@ -57,14 +58,35 @@ class World:
             self.face_group = np.append(group, np.int8(-1))
             self.lights.link_faces(self.accel.faces, self.accel.first_face)
         self._targets: dict[str, DiskTarget | MeshTarget] = {}
+        #: Stokes-vector transport (tracer.optics.polar.Transport) where the scene needs it, else None.
+        self.polar = self._polar()
         #: Ray segments of a world without geometry (they all escape at once; counted as traced).
         self.rays_without_geometry = 0
+
+    def _polar(self, eye: EyeSpec | None = None):
+        """The polarised transport of this world, or None where nothing polarises: the scene's
+        ``polarisation`` is "off", or no material polarises (tracer.optics.bsdf.BSDF.polarising), no
+        emitter is polarised and the eye has no analyser."""
+        scene = self.scene
+        eye = eye if eye is not None else scene.eye
+        if scene.polarisation == "off":
+            return None
+        emitters = any(o.emission is not None and o.emission.polarisation is not None for o in scene.objects)
+        if not (any(m.polarising for m in self.materials) or emitters or eye.analyser is not None):
+            return None
+        return Transport(self, eye)
+
+    @property
+    def polarised(self) -> bool:
+        """Whether paths carry Stokes vectors in this world."""
+        return self.polar is not None
 
     def with_eye(self, spec: EyeSpec) -> World:
         """This world seen by another eye (same geometry, materials and lights)."""
         other = copy.copy(self)
         other.eye = ThinLensEye(spec)
         other._targets = {k: v for k, v in self._targets.items() if k != "eye"}
+        other.polar = other._polar(spec)
         return other
 
     def channel(self, lights: bool = True, environment: bool = True) -> World:

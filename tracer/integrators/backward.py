@@ -211,8 +211,11 @@ class BackwardTracer(Integrator, PathMethod):
         lens, lens_weight = self.lens_samples(rng, n)
         o, d, geo = eye.generate_rays(sx, sy, lens)
         beta = np.broadcast_to((geo * (eye.pixel_area * lens_weight / eye.extent[pix])).astype(F32), (3, n)).copy()
-        return PathState(o, d, beta, pix, rep, np.zeros(n), np.ones(n, bool),
-                         {"sample": np.arange(first, first + n), "splits": np.zeros(n, np.int8)})
+        extra = {"sample": np.arange(first, first + n), "splits": np.zeros(n, np.int8)}
+        if self.world.polar is not None:  # the row vector of the eye's detector (and analyser)
+            beta, pol = self.world.polar.start_camera(beta, d)
+            extra |= pol
+        return PathState(o, d, beta, pix, rep, np.zeros(n), np.ones(n, bool), extra)
 
     def _run(self, ctx, pix, rep) -> int:
         """Trace one sample through each of ``pix``, in waves of :data:`WAVE`; the samples that found light."""
@@ -265,7 +268,10 @@ class BackwardTracer(Integrator, PathMethod):
         self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
 
     def emitted(self, state, tri, p, t, ctx):
-        value = state.beta * self.lights.emitted(tri, state.d)
+        beta = state.beta
+        if self.world.polar is not None and "stokes" in state.extra:
+            beta = self.world.polar.emitted(beta, state.extra, state.d, self.lights.slot[tri])
+        value = beta * self.lights.emitted(tri, state.d)
         if self.nee_lights:
             cos_y = np.abs(dot(state.d, np.take(self.lights.tris.normal, tri, axis=1)))
             p_light = solid_angle_pdf(self.lights.pdf_power_area(tri), t, cos_y)
@@ -338,10 +344,18 @@ class BackwardTracer(Integrator, PathMethod):
         more = nxt.reserve(len(j))  # the second goes after the bounce's hits
         nxt.owner[more], nxt.rep[more] = nxt.owner[rows], nxt.rep[rows]
         for v in nxt.extra.values():
-            v[more] = v[rows]
-        for (wo, weight, _flags, _label), at in zip(lobes, (rows, more), strict=True):
+            v[..., more] = v[..., rows]
+        polar = self.world.polar if "stokes" in state.extra else None
+        sub = state.take(j) if polar is not None else None
+        it_j = it.take(j) if polar is not None else None
+        for (wo, weight, flags, _label), at in zip(lobes, (rows, more), strict=True):
             w = np.take(wo, j, axis=1)
-            beta = beta0 * np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
+            weight_j = np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
+            if polar is not None:
+                beta, nxt.extra["stokes"][..., at], nxt.extra["frame"][:, at] = polar.scatter(
+                    sub.beta, sub.extra, it_j, bsdf, w, weight_j, np.full(len(j), flags, np.int8), False)
+            else:
+                beta = beta0 * weight_j
             nxt.o[:, at] = self.world.accel.spawn(p, ng, w, off)
             nxt.d[:, at], nxt.beta[:, at] = w, beta
             nxt.pdf[at], nxt.specular[at], nxt.alive[at] = 0, True, luminance3(beta) > 0

@@ -60,8 +60,10 @@ class Particles:
         start = np.take(points, alive, axis=1)
         o = self.world.accel.spawn(start, np.take(normal, alive, axis=1), wo)
         pid = first + alive
-        state = PathState(o, wo, np.take(beta, alive, axis=1), pid, pid % replicates, s.pdf[alive],
-                          np.zeros(len(alive), bool))
+        beta = np.take(beta, alive, axis=1)
+        polar = self.world.polar
+        extra = polar.start_light(beta, wo, lights.slot[tri[alive]]) if polar is not None else {}
+        state = PathState(o, wo, beta, pid, pid % replicates, s.pdf[alive], np.zeros(len(alive), bool), extra)
         return state, start
 
 
@@ -135,7 +137,11 @@ class ForwardTracer(Integrator, PathMethod):
             ok = pix >= 0
             k, pix = k[ok], pix[ok]
             ctx.found += len(k)
-            ctx.splats.add("light", pix, state.rep[k], np.take(state.beta, k, axis=1) / eye.extent[pix])
+            value = np.take(state.beta, k, axis=1)
+            if self.world.polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
+                value = self.world.polar.detect(value, {n: np.take(v, k, axis=-1) for n, v in state.extra.items()},
+                                                np.take(state.d, k, axis=1))
+            ctx.splats.add("light", pix, state.rep[k], value / eye.extent[pix])
         return at
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..accel import OFFSET_SCALE
-from ..optics.bsdf import DELTA
+from ..optics.bsdf import DELTA, IMPORTANCE
 from ..units import luminance3
 from ..vec import F32, max3, norm
 
@@ -80,8 +80,9 @@ class PathState:
     pixel (camera paths) or particle index (light paths). rep : (n,) int64 replicate of the film.
     pdf : (n,) float32 solid-angle pdf with which the last direction was sampled (0 after a delta lobe).
     specular : (n,) bool, the last vertex was a delta lobe (or the path start): what the path finds
-    next is counted in full, without a multiple-importance weight. extra : method-specific (n,)
-    arrays carried along (the analysis' chain codes).
+    next is counted in full, without a multiple-importance weight. extra : method-specific arrays
+    whose last axis is the path ((n,): the analysis' chain codes; (3, 3, n) and (3, n): the Stokes vector
+    and its frame of tracer.optics.polar where the world needs them).
     """
 
     o: np.ndarray
@@ -100,10 +101,10 @@ class PathState:
         """The paths ``idx`` (an index array, or a slice for views), in that order."""
         if isinstance(idx, slice):
             return PathState(self.o[:, idx], self.d[:, idx], self.beta[:, idx], self.owner[idx], self.rep[idx],
-                             self.pdf[idx], self.specular[idx], {k: v[idx] for k, v in self.extra.items()})
+                             self.pdf[idx], self.specular[idx], {k: v[..., idx] for k, v in self.extra.items()})
         t2 = lambda a: np.take(a, idx, axis=1)  # noqa: E731
         return PathState(t2(self.o), t2(self.d), t2(self.beta), self.owner[idx], self.rep[idx], self.pdf[idx],
-                         self.specular[idx], {k: v[idx] for k, v in self.extra.items()})
+                         self.specular[idx], {k: np.take(v, idx, axis=-1) for k, v in self.extra.items()})
 
     @staticmethod
     def concat(parts: list[PathState]) -> PathState:
@@ -111,7 +112,7 @@ class PathState:
             return parts[0]
         c2 = lambda name: np.concatenate([getattr(p, name) for p in parts], axis=1)  # noqa: E731
         c1 = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-        extra = {k: np.concatenate([p.extra[k] for p in parts]) for k in parts[0].extra}
+        extra = {k: np.concatenate([p.extra[k] for p in parts], axis=-1) for k in parts[0].extra}
         return PathState(c2("o"), c2("d"), c2("beta"), c1("owner"), c1("rep"), c1("pdf"), c1("specular"), extra)
 
     @staticmethod
@@ -296,8 +297,8 @@ class Next:
         n = m + spare
 
         def like(a):
-            out = np.empty(n, a.dtype)
-            out[:m] = a
+            out = np.empty(a.shape[:-1] + (n,), a.dtype)
+            out[..., :m] = a
             return out
 
         return Next(np.empty((3, n)), np.empty((3, n), F32), np.zeros((3, n), F32), np.empty(n, F32),
@@ -319,14 +320,20 @@ class Next:
         self.pdf[sl], self.specular[sl], self.alive[sl] = state.pdf, state.specular, True
         self.owner[sl], self.rep[sl] = state.owner, state.rep
         for k, v in state.extra.items():
-            self.extra[k][sl] = v
+            self.extra[k][..., sl] = v
 
 
 def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice) -> list[PathState]:
     """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path,
     written into ``nxt[sl]``; absorbed samples end. Returns no further paths."""
     s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it)), F32) if sampler.dims else None, mode)
-    beta = state.beta * s.weight
+    polar = ctx.world.polar
+    if polar is not None and "stokes" in state.extra:
+        bsdf = getattr(sampler, "own", sampler)  # an aimed mixture scatters by its material's law
+        beta, nxt.extra["stokes"][..., sl], nxt.extra["frame"][:, sl] = polar.scatter(
+            state.beta, state.extra, it, bsdf, s.wo, s.weight, s.flags, mode == IMPORTANCE)
+    else:
+        beta = state.beta * s.weight
     nxt.beta[:, sl] = beta
     nxt.d[:, sl] = s.wo
     nxt.o[:, sl] = ctx.world.accel.spawn(it.p, it.ng, s.wo, it.offset)
@@ -353,7 +360,7 @@ def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
     keep = np.flatnonzero(alive)
     t2 = lambda a: np.take(a, keep, axis=1)  # noqa: E731
     return PathState(t2(nxt.o), t2(nxt.d), t2(nxt.beta), nxt.owner[keep], nxt.rep[keep], nxt.pdf[keep],
-                     nxt.specular[keep], {k: v[keep] for k, v in nxt.extra.items()})
+                     nxt.specular[keep], {k: np.take(v, keep, axis=-1) for k, v in nxt.extra.items()})
 
 
 #: Paths cut at max_depth are followed this many segments further by :func:`probe_cut`.

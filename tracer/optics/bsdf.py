@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..vec import F32, dot
+from .polar import DEPOLARISE, Mueller
 
 #: Transport modes.
 RADIANCE, IMPORTANCE = "radiance", "importance"
@@ -117,6 +118,10 @@ class BSDF:
     dims = 0
     #: False for virtual objects that are not traced (apertures).
     traced = True
+    #: Whether the material changes light's state of polarisation by intensity (a diattenuator: Fresnel
+    #: surfaces, s/p coatings, metals, polarisers). A world needs Stokes vectors only where some object
+    #: does, or a source or the eye is polarised (tracer.optics.polar).
+    polarising = False
 
     def __init__(self, objects: list):
         """``objects``: the scene objects (tracer.scene.SceneObject) of this material, with their
@@ -156,6 +161,14 @@ class BSDF:
     def eval_pdf(self, it: Interaction, wo: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray]:
         """(eval, pdf) together; materials whose two share work override it."""
         return self.eval(it, wo, mode), self.pdf(it, wo)
+
+    def mueller(self, it: Interaction, k_in: np.ndarray, k_out: np.ndarray, flags: np.ndarray):
+        """The normalised Mueller matrix (tracer.optics.polar.Mueller) of the lobes ``flags`` (n,) that
+        take light arriving along ``k_in`` to ``k_out`` (both (3, n), the light's directions, whatever
+        the path's), or None for the identity on an undeviated ray. The default: scattering lobes
+        depolarise, delta lobes are the identity (materials that deviate light by a delta lobe or
+        polarise override it)."""
+        return None if self.flags & DELTA else Mueller(DEPOLARISE)
 
     def prepare(self, it: Interaction):
         """Compute what later calls on ``it`` or on its subsets (Interaction.take) share (local frames)."""

@@ -20,6 +20,7 @@ from ..units import luminance3
 from ..vec import F32, dot, reflect
 from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
 from .fresnel import fresnel_unpolarized, refract
+from .polar import POLARISE, SP, Mueller, amplitudes, axis_frame, s_frame, sp_from_amplitudes, sp_from_powers
 
 #: The smallest positive value the float32 densities and probabilities are clamped to (1e-300 does
 #: not exist in float32).
@@ -85,25 +86,88 @@ class Aperture(BSDF):
     traced = False
 
 
+def _axis_deg(description: str, default=REQUIRED) -> Field:
+    return Field("axis_deg", "number", default, unit="deg", minimum=-360.0, maximum=360.0, label="Axis",
+                 description=description, ui_default=0.0)
+
+
+def _reflection_frame(it: Interaction) -> np.ndarray:
+    """The s direction of every ray's plane of incidence on the shading normal, (3, n)."""
+    if "s_frame" not in it.cache:
+        it.cache["s_frame"] = s_frame(it.d, it.ns)
+    return it.cache["s_frame"]
+
+
+#: The Mueller matrix of a reflection that keeps the light's polarisation (an ideal mirror's r_s = -1,
+#: r_p = 1 in the s/p frames of tracer.optics.polar): the flip of the p basis on reflection.
+IDEAL_REFLECTION = {"b": 0.0, "c": -1.0, "d": 0.0}
+
+
 @material
 class Mirror(BSDF):
-    """Ideal mirror of RGB reflectance R, reflecting on both sides about the shading normal."""
+    """Mirror of RGB reflectance R, reflecting on both sides about the shading normal.
 
-    schema = Schema("mirror", "Mirror", "Ideal specular reflector on both sides",
-                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1 per channel"),))
+    Ideal by default (every polarisation reflected alike, R at every angle). With a ``metal`` block, the
+    complex refractive index n + i kappa of a metal (Born & Wolf sec. 14.2) gives the s and p
+    amplitudes: R(theta) = R (R_s + R_p) / 2 / R_metal(0), so that ``reflectance`` stays the measured
+    normal-incidence value, and the reflection polarises (tracer.optics.polar).
+    """
+
+    schema = Schema("mirror", "Mirror", "Specular reflector on both sides",
+                    (_rgb("reflectance", label="Reflectance",
+                          description="Specular reflectance (at normal incidence for a metal), 0..1 per channel"),
+                     Field("metal", "group", None, label="Metal",
+                           description="Fresnel reflection of a metal: angle-dependent and polarising",
+                           fields=(Field("complex_ior", "pair", unit="1", minimum=0.0, maximum=100.0,
+                                         label="Complex IOR", description="n and kappa of the metal (aluminium "
+                                         "at 550 nm: 0.96, 6.69)", ui_default=[0.96, 6.69]),))))
     flags = DELTA | REFLECTION
 
     def __init__(self, objects):
         super().__init__(objects)
         self.r = self.table("reflectance")
+        metal = [o.material.params.get("metal") for o in objects]
+        self.metal = any(m is not None for m in metal)
+        self.polarising = self.metal
+        if self.metal:
+            # eta per object (complex); ideal mirrors among them: eta = infinity is approximated by a
+            # flag (r_s = -1, r_p = 1 exactly).
+            self.eta = np.array([complex(*m["complex_ior"]) if m is not None else 0j for m in metal])
+            self.is_metal = np.array([m is not None for m in metal])
+            rs, rp, _, _ = amplitudes(np.ones(len(metal)), np.where(self.is_metal, self.eta, 1.0))
+            self.r_normal = np.where(self.is_metal, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 1.0)
+
+    def _metal(self, it: Interaction):
+        """(weight factor R(theta) / R(0) (n,), (b, c, d)) of the rays' objects, cached."""
+        if "metal" not in it.cache:
+            local = self.local[it.slot]
+            cos_i = np.abs(dot(it.d, it.ns))
+            eta = self.eta[local]
+            metal = self.is_metal[local]
+            rs, rp, _, _ = amplitudes(cos_i, np.where(metal, eta, 1.0))
+            factor = np.where(metal, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2) / self.r_normal[local], 1.0)
+            b, c, d = sp_from_amplitudes(rs, rp)
+            it.cache["metal"] = (factor.astype(F32), np.where(metal, b, F32(0)), np.where(metal, c, F32(-1)),
+                                 np.where(metal, d, F32(0)))
+        return it.cache["metal"]
+
+    def _weight(self, it):
+        r = self.gather(self.r, it)
+        return r * self._metal(it)[0] if self.metal else r
 
     def sample(self, it, u, mode):
         n = len(it)
-        return BSDFSample(mirror_directions(it), self.gather(self.r, it), np.zeros(n, F32),
-                          np.full(n, self.flags, np.int8))
+        return BSDFSample(mirror_directions(it), self._weight(it), np.zeros(n, F32), np.full(n, self.flags, np.int8))
 
     def lobes(self, it, mode):
-        return [(mirror_directions(it), self.gather(self.r, it), self.flags, "reflect")]
+        return [(mirror_directions(it), self._weight(it), self.flags, "reflect")]
+
+    def mueller(self, it, k_in, k_out, flags):
+        x = _reflection_frame(it)
+        if not self.metal:
+            return Mueller(SP, x, x, **IDEAL_REFLECTION)
+        _, b, c, d = self._metal(it)
+        return Mueller(SP, x, x, b, c, d)
 
 
 @material
@@ -122,6 +186,7 @@ class Dielectric(BSDF):
                            description="Refractive index on the normals' side")))
     flags = DELTA | REFLECTION | TRANSMISSION
     dims = 1
+    polarising = True
 
     def __init__(self, objects):
         super().__init__(objects)
@@ -174,23 +239,75 @@ class Dielectric(BSDF):
         d_r, d_t = self._branches(it)
         return [(d_r, r[None], DELTA | REFLECTION, "reflect"), (d_t, t[None], DELTA | TRANSMISSION, "refract")]
 
+    def mueller(self, it, k_in, k_out, flags):
+        """Fresnel reflection or refraction in the s/p frame of the plane of incidence (Born & Wolf sec.
+        1.5.2; total internal reflection with its phase, sec. 1.5.4). Reflection and refraction are
+        reciprocal, so camera paths and light paths share the matrices."""
+        if "fresnel_sp" not in it.cache:
+            side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
+            rs, rp, ts, tp = amplitudes(cos_i, eta)
+            it.cache["fresnel_sp"] = (s_frame(it.d, n_face), sp_from_amplitudes(rs, rp), sp_from_amplitudes(ts, tp))
+        x, refl, refr = it.cache["fresnel_sp"]
+        is_r = (flags & REFLECTION) != 0
+        b, c, d = (np.where(is_r, a, t) for a, t in zip(refl, refr, strict=True))
+        return Mueller(SP, x, x, b, c, d)
+
+
+def _coating_check(params: dict, fail):
+    if "reflectance_s" in params:
+        for pol in "sp":
+            if np.any(params[f"reflectance_{pol}"] + params[f"transmittance_{pol}"] > 1 + 1e-12):
+                fail("", f"reflectance_{pol} + transmittance_{pol} must not exceed 1 (energy conservation)")
+    else:
+        _energy_check(params, fail)
+
 
 @material
 class Coating(BSDF):
     """Coated thin partial reflector: reflects with R, transmits undeviated with T, absorbs the rest.
-    The branch is chosen with probability Y(R) / (Y(R) + Y(T))."""
+    The branch is chosen with probability Y(R) / (Y(R) + Y(T)).
+
+    Given R_s, R_p, T_s, T_p (the coating's reflectances and transmittances for s and p light at its
+    angle of use) instead of R and T, it polarises: R = (R_s + R_p) / 2 and T = (T_s + T_p) / 2 for
+    unpolarised light, and the Mueller matrices of a diattenuator in the s/p frame of each ray's plane
+    of incidence, without retardance (tracer.optics.polar).
+    """
 
     schema = Schema("coating", "Coated partial reflector",
                     "Thin coated plate: specular reflectance R, undeviated transmittance T",
-                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1"),
-                     _rgb("transmittance", label="Transmittance", description="Undeviated transmittance, 0..1")),
-                    check=_energy_check)
+                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1", required=False),
+                     _rgb("transmittance", label="Transmittance", description="Undeviated transmittance, 0..1",
+                          required=False),
+                     _rgb("reflectance_s", label="Reflectance s", description="Reflectance for s light, 0..1",
+                          required=False),
+                     _rgb("reflectance_p", label="Reflectance p", description="Reflectance for p light, 0..1",
+                          required=False),
+                     _rgb("transmittance_s", label="Transmittance s", description="Transmittance for s light, 0..1",
+                          required=False),
+                     _rgb("transmittance_p", label="Transmittance p", description="Transmittance for p light, 0..1",
+                          required=False)),
+                    alternatives=(("reflectance", "transmittance"),
+                                  ("reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p")),
+                    check=_coating_check)
     flags = DELTA | REFLECTION | TRANSMISSION
     dims = 1
 
     def __init__(self, objects):
         super().__init__(objects)
-        self.r, self.t = self.table("reflectance"), self.table("transmittance")
+        params = [o.material.params for o in objects]
+        self.polarising = any("reflectance_s" in p for p in params)
+        rgb = lambda p, k: np.asarray(p[k], dtype=F32)  # noqa: E731
+        if self.polarising:
+            # Every object as s/p values (an unpolarised one: R_s = R_p = R).
+            names = ("reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p")
+            sp = [tuple(rgb(p, k) for k in names) if "reflectance_s" in p
+                  else (rgb(p, "reflectance"),) * 2 + (rgb(p, "transmittance"),) * 2 for p in params]
+            rs, rp, ts, tp = (np.stack([v[i] for v in sp], axis=-1) for i in range(4))
+            self.r, self.t = 0.5 * (rs + rp), 0.5 * (ts + tp)
+            self.sp_reflect = sp_from_powers(rs, rp, sign=-1.0)  # each (3, objects)
+            self.sp_transmit = sp_from_powers(ts, tp)
+        else:
+            self.r, self.t = self.table("reflectance"), self.table("transmittance")
         yr, yt = luminance3(self.r), luminance3(self.t)
         self.p_reflect = np.where(yr + yt > 0, yr / np.where(yr + yt > 0, yr + yt, 1), 0).astype(F32)
 
@@ -208,6 +325,17 @@ class Coating(BSDF):
         return [(mirror_directions(it), self.gather(self.r, it), DELTA | REFLECTION, "reflect"),
                 (it.d, self.gather(self.t, it), DELTA | TRANSMISSION, "transmit")]
 
+    def mueller(self, it, k_in, k_out, flags):
+        is_r = (flags & REFLECTION) != 0
+        x = _reflection_frame(it)
+        if not self.polarising:
+            if not np.any(is_r):
+                return None
+            return Mueller(SP, x, x, np.where(is_r, F32(0), F32(0)), np.where(is_r, F32(-1), F32(1)), F32(0))
+        b, c, d = (np.where(is_r, self.gather(a, it), self.gather(t, it))
+                   for a, t in zip(self.sp_reflect, self.sp_transmit, strict=True))
+        return Mueller(SP, x, x, b, c, d)
+
 
 @material
 class LCD(BSDF):
@@ -216,6 +344,12 @@ class LCD(BSDF):
     T(u, v) = transmittance * (1/CR + (1 - 1/CR) * image(u, v)), so a clear cell transmits
     ``transmittance`` and a black cell ``transmittance / contrast_ratio`` (the paper's 300:1 black
     leak, sec. 3). Cells are looked up nearest-neighbour: the cellular structure is kept.
+
+    With a ``polariser`` block the panel's output polariser leaves its light (the symbols' and the black
+    leak's alike) linearly polarised along its axis, at ``axis_deg`` from the object's local x axis
+    toward its local y axis: Mueller matrix T [[1, 0, 0, 0], [1, 0, 0, 0], 0, 0] in the axis frame
+    (the panel's rear polariser, liquid crystal and front polariser as one element fed by an
+    unpolarised backlight: T stays the panel's transmittance for unpolarised light).
     """
 
     schema = Schema("lcd", "LCD modulator", "Thin transmissive image (the slide), light passes undeviated",
@@ -225,11 +359,20 @@ class LCD(BSDF):
                      _rgb("transmittance", 1.0, "Transmittance", "Transmittance of a clear cell, 0..1",
                           required=False),
                      Field("contrast_ratio", "number", 300.0, unit="1", minimum=1.0, maximum=1e9,
-                           label="Contrast ratio", description="Clear-cell over black-cell transmittance")))
+                           label="Contrast ratio", description="Clear-cell over black-cell transmittance"),
+                     Field("polariser", "group", None, label="Output polariser",
+                           description="The panel's light leaves linearly polarised along this axis",
+                           fields=(_axis_deg("Transmission axis, degrees from the object's local x axis toward "
+                                             "its local y axis"),))))
     flags = DELTA | TRANSMISSION
 
     def __init__(self, objects):
         super().__init__(objects)
+        pol = [o.material.params.get("polariser") for o in objects]
+        self.polarising = any(p is not None for p in pol)
+        if self.polarising:
+            self.pol_axis = np.stack([o.axis(p["axis_deg"]) if p is not None else o.local_x
+                                      for o, p in zip(objects, pol, strict=True)], axis=-1).astype(F32)
         #: Per object: (image height, width, (3, H W) cells relative to a clear cell, row-major from the top).
         self.cells = []
         for o in objects:
@@ -277,6 +420,48 @@ class LCD(BSDF):
 
     def lobes(self, it, mode):
         return [(it.d, self.transmittance(it), self.flags, "transmit")]
+
+    def mueller(self, it, k_in, k_out, flags):
+        if not self.polarising:
+            return None
+        axis = self.gather(self.pol_axis, it)  # every LCD of the scene has one (tracer.scene checks)
+        return Mueller(POLARISE, axis_frame(axis, k_in), axis_frame(axis, k_out))
+
+
+@material
+class Retarder(BSDF):
+    """Thin retarder film (a half-wave plate by default): transmits T undeviated and delays the light
+    polarised across its fast axis by the retardance delta; Mueller matrix T [[1, 0, 0, 0], [0, 1, 0, 0],
+    [0, 0, cos delta, sin delta], [0, 0, -sin delta, cos delta]] in the frame of the fast axis (Collett,
+    Field Guide to Polarization, doi:10.1117/3.626141). A half-wave film turns linear polarisation at
+    angle a to its axis to -a: at 45 degrees, s light becomes p light (HUDs use it for polarised
+    sunglasses). Normal incidence is assumed for the retardance."""
+
+    schema = Schema("retarder", "Retarder film (half-wave plate)",
+                    "Thin film that rotates linear polarisation (undeviated transmission)",
+                    (_rgb("transmittance", 1.0, "Transmittance", "Transmittance, 0..1", required=False),
+                     _axis_deg("Fast axis, degrees from the object's local x axis toward its local y axis"),
+                     Field("retardance_deg", "number", 180.0, unit="deg", minimum=0.0, maximum=360.0,
+                           label="Retardance", description="Phase delay between the axes, degrees (180: half-wave)")))
+    flags = DELTA | TRANSMISSION
+
+    def __init__(self, objects):
+        super().__init__(objects)
+        self.t = self.table("transmittance")
+        self.axis = np.stack([o.axis(o.material.params["axis_deg"]) for o in objects], axis=-1).astype(F32)
+        delta = np.radians(self.table("retardance_deg"))
+        self.cos_d, self.sin_d = np.cos(delta).astype(F32), np.sin(delta).astype(F32)
+
+    def sample(self, it, u, mode):
+        n = len(it)
+        return BSDFSample(it.d, self.gather(self.t, it), np.zeros(n, F32), np.full(n, self.flags, np.int8))
+
+    def lobes(self, it, mode):
+        return [(it.d, self.gather(self.t, it), self.flags, "transmit")]
+
+    def mueller(self, it, k_in, k_out, flags):
+        x = axis_frame(self.gather(self.axis, it), k_in)
+        return Mueller(SP, x, x, F32(0), self.gather(self.cos_d, it), self.gather(self.sin_d, it))
 
 
 @material

@@ -1,0 +1,534 @@
+"""Polarisation (issue 13): Stokes vectors and Mueller matrices against closed forms, every method on a
+windshield-like plate for unpolarised, s and p light, polarisers, analysers, a half-wave film,
+depolarisation, and the hud-direct variants.
+
+Closed forms: Fresnel's s and p reflectances (Born & Wolf, Principles of Optics, sec. 1.5.2, in the
+angle form R_s = sin^2(i - t) / sin^2(i + t), R_p = tan^2(i - t) / tan^2(i + t)), Brewster's angle
+tan(i_B) = n, the total-internal-reflection phase (sec. 1.5.4, eq. 60), Malus's law, and the flat
+plate's incoherent reflectance R + T^2 R / (1 - R^2) for each polarisation, with the ghost-to-primary
+ratio [(1-Rs)^2 Rs + (1-Rp)^2 Rp] / (Rs + Rp) for unpolarised light (0.576 at 67 deg, n = 1.52),
+(1 - Rs)^2 for s light (0.545) and (1 - Rp)^2 for p light (0.958)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import edit_json, z_bound
+
+from presets import PRESETS
+from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle
+from tracer.analysis import specular_paths
+from tracer.errors import SceneError
+from tracer.integrators import INTEGRATORS, Budget
+from tracer.optics import polar
+from tracer.optics.bsdf import DELTA, IMPORTANCE, RADIANCE, REFLECTION, TRANSMISSION, Interaction
+from tracer.optics.materials import Coating, Dielectric, Mirror
+from tracer.scene import SceneObject, load_scene
+from tracer.units import Y_WEIGHTS
+from tracer.vec import F32
+from tracer.world import World
+
+N_GLASS = 1.52
+
+
+def fresnel_angles(theta_deg: float, n: float = N_GLASS) -> tuple[float, float]:
+    """(R_s, R_p) from the angle form of Fresnel's equations (independent of tracer.optics)."""
+    i = math.radians(theta_deg)
+    t = math.asin(math.sin(i) / n)
+    return math.sin(i - t) ** 2 / math.sin(i + t) ** 2, math.tan(i - t) ** 2 / math.tan(i + t) ** 2
+
+
+def plate_total(r: float) -> float:
+    """A flat plate's reflectance with all its internal reflections (incoherent): R + T^2 R / (1 - R^2)."""
+    return r + (1 - r) ** 2 * r / (1 - r * r)
+
+
+# -- Mueller matrices of single interfaces -----------------------------------------------------------
+class _Obj:
+    """The least of a scene object a material needs (its parameters and slot)."""
+
+    def __init__(self, params, slot=0):
+        self.material = type("M", (), {"params": params})()
+        self.slot = slot
+        self.local_x = np.array([1.0, 0.0, 0.0])
+
+
+def _interaction(theta_deg: float, n: int = 1) -> Interaction:
+    """Rays arriving at theta_deg on the front of a surface with normal +z, in the x-z plane."""
+    t = math.radians(theta_deg)
+    d = np.tile(np.array([[math.sin(t)], [0.0], [-math.cos(t)]], F32), (1, n))
+    ng = np.tile(np.array([[0.0], [0.0], [1.0]], F32), (1, n))
+    return Interaction(d, np.zeros((3, n)), ng, ng, None, np.zeros(n, np.int64))
+
+
+def _reflect_unpolarised(mat, theta_deg: float):
+    """(S0, S1) of unpolarised light of intensity 1 after the reflection lobe, in the s frame."""
+    it = _interaction(theta_deg)
+    s = mat.sample(it, np.zeros((max(mat.dims, 1), 1), F32), IMPORTANCE)
+    lobes = mat.lobes(it, IMPORTANCE)
+    wo, weight = lobes[0][0], np.broadcast_to(lobes[0][1], (3, 1))
+    m = mat.mueller(it, it.d, wo, np.full(1, DELTA | REFLECTION, np.int8))
+    s0, s_ = polar.sp_apply(np.ones((3, 1), F32), np.zeros((3, 3, 1), F32), m.b, m.c, m.d, row=False)
+    assert s.flags[0] & REFLECTION
+    return float(weight[1, 0] * s0[1, 0]), float(weight[1, 0] * s_[0, 1, 0]), m
+
+
+@pytest.mark.parametrize("theta", [10.0, 30.0, 45.0, 60.0, 67.0, 80.0])
+def test_dielectric_reflects_s_and_p_as_fresnel_says(theta):
+    mat = Dielectric([_Obj({"ior": N_GLASS, "ior_outside": 1.0})])
+    rs, rp = fresnel_angles(theta)
+    s0, s1, m = _reflect_unpolarised(mat, theta)
+    # Unpolarised light reflects (Rs + Rp) / 2, polarised by (Rs - Rp) / 2 along s (S1 in the s frame).
+    assert s0 == pytest.approx(0.5 * (rs + rp), rel=1e-5)
+    assert s1 == pytest.approx(0.5 * (rs - rp), rel=1e-4, abs=1e-7)
+    # The s frame is perpendicular to the plane of incidence (x-z): along y.
+    assert abs(float(m.x_in[1, 0])) == pytest.approx(1.0, abs=1e-6)
+    # s light alone: Rs; p light alone: Rp.
+    for sign, expected in ((1.0, rs), (-1.0, rp)):
+        s0p, _ = polar.sp_apply(np.ones((3, 1)), np.array([[[sign]] * 3, [[0.0]] * 3, [[0.0]] * 3]), m.b, m.c, m.d,
+                                row=False)
+        assert 0.5 * (rs + rp) * float(s0p[0, 0]) == pytest.approx(expected, rel=1e-4, abs=1e-7)
+
+
+def test_brewster_angle_reflects_no_p_light():
+    """At tan(i) = n the reflection is fully s-polarised: degree of polarisation 1 (b = 1)."""
+    mat = Dielectric([_Obj({"ior": N_GLASS, "ior_outside": 1.0})])
+    s0, s1, m = _reflect_unpolarised(mat, math.degrees(math.atan(N_GLASS)))
+    assert s1 / s0 == pytest.approx(1.0, abs=1e-5)
+    rs, _ = fresnel_angles(math.degrees(math.atan(N_GLASS)))
+    assert s0 == pytest.approx(rs / 2, rel=1e-5)
+
+
+def test_refraction_transmits_one_minus_r_for_each_polarisation():
+    for theta in (20.0, 50.0, 67.0):
+        rs, rp = fresnel_angles(theta)
+        c = math.cos(math.radians(theta))
+        _, _, ts, tp = polar.amplitudes(np.array([c]), N_GLASS)
+        b, cc, d = polar.sp_from_amplitudes(ts, tp)
+        t_unpol = 1 - 0.5 * (rs + rp)
+        assert t_unpol * (1 + float(b[0])) == pytest.approx(1 - rs, rel=1e-5)
+        assert t_unpol * (1 - float(b[0])) == pytest.approx(1 - rp, rel=1e-5)
+        # A non-depolarising element: b^2 + c^2 + d^2 = 1.
+        assert float(b[0]) ** 2 + float(cc[0]) ** 2 + float(d[0]) ** 2 == pytest.approx(1.0, abs=1e-5)
+
+
+def test_total_internal_reflection_keeps_intensity_and_retards_by_born_and_wolf():
+    """Inside glass beyond the critical angle |r_s| = |r_p| = 1 and the phase difference delta obeys
+    tan(delta / 2) = cos(i) sqrt(sin^2 i - n^2) / sin^2 i, n = 1 / 1.52 (Born & Wolf eq. 1.5 (60)); the
+    Fresnel rhomb: two reflections at 54.6 deg in n = 1.51 make a quarter wave."""
+    for theta in (45.0, 54.6, 70.0):
+        i = math.radians(theta)
+        n = 1 / N_GLASS
+        rs, rp, _, _ = polar.amplitudes(np.array([math.cos(i)]), n)
+        assert abs(rs[0]) == pytest.approx(1.0, abs=1e-12) and abs(rp[0]) == pytest.approx(1.0, abs=1e-12)
+        b, c, d = polar.sp_from_amplitudes(rs, rp)
+        delta = 2 * math.atan(math.cos(i) * math.sqrt(math.sin(i) ** 2 - n * n) / math.sin(i) ** 2)
+        assert float(b[0]) == pytest.approx(0.0, abs=1e-6)
+        # c + i d = 2 r_s conj(r_p) / (|r_s|^2 + |r_p|^2): its phase is the retardance.
+        assert abs(math.atan2(float(d[0]), float(c[0]))) == pytest.approx(delta, abs=1e-5)
+        assert float(c[0]) ** 2 + float(d[0]) ** 2 == pytest.approx(1.0, abs=1e-5)
+    rs, rp, _, _ = polar.amplitudes(np.array([math.cos(math.radians(54.6))]), 1 / 1.51)
+    z = rs[0] * np.conj(rp[0])
+    assert 2 * abs(math.atan2(z.imag, z.real)) == pytest.approx(math.pi / 2, abs=0.01)
+
+
+def test_metal_mirror_follows_the_complex_fresnel_equations():
+    """Aluminium (n = 0.96 + 6.69i at 550 nm): R_s and R_p at 45 and 75 deg from the textbook's
+    expressions for absorbing media (Born & Wolf sec. 14.2; the form of Heavens), and the mirror's
+    reflectance field as its normal-incidence value."""
+    eta = complex(0.96, 6.69)
+    r_normal = abs((1 - eta) / (1 + eta)) ** 2
+    mat = Mirror([_Obj({"reflectance": np.full(3, 0.9), "metal": {"complex_ior": np.array([0.96, 6.69])}})])
+    assert mat.polarising
+    for theta in (0.0, 45.0, 75.0):
+        i = math.radians(theta)
+        cos_t = np.sqrt(1 - (math.sin(i) / eta) ** 2)
+        rs = abs((math.cos(i) - eta * cos_t) / (math.cos(i) + eta * cos_t)) ** 2
+        rp = abs((eta * math.cos(i) - cos_t) / (eta * math.cos(i) + cos_t)) ** 2
+        s0, s1, _ = _reflect_unpolarised(mat, theta)
+        assert s0 == pytest.approx(0.9 * 0.5 * (rs + rp) / r_normal, rel=1e-5)
+        assert s1 == pytest.approx(0.9 * 0.5 * (rs - rp) / r_normal, rel=1e-4, abs=1e-7)
+    ideal = Mirror([_Obj({"reflectance": np.full(3, 0.9)})])
+    assert not ideal.polarising
+    s0, s1, m = _reflect_unpolarised(ideal, 60.0)
+    assert (s0, s1, float(m.c)) == pytest.approx((0.9, 0.0, -1.0))
+
+
+def test_coating_given_for_s_and_p():
+    params = {k: np.full(3, v) for k, v in
+              {"reflectance_s": 0.3, "reflectance_p": 0.1, "transmittance_s": 0.6, "transmittance_p": 0.85}.items()}
+    mat = Coating([_Obj(params)])
+    assert mat.polarising
+    it = _interaction(60.0)
+    for flags, (ts, tp) in ((DELTA | REFLECTION, (0.3, 0.1)), (DELTA | TRANSMISSION, (0.6, 0.85))):
+        m = mat.mueller(it, it.d, it.d, np.full(1, flags, np.int8))
+        mean = 0.5 * (ts + tp)
+        for sign, expected in ((1.0, ts), (-1.0, tp)):
+            s0, _ = polar.sp_apply(np.ones((3, 1)), np.array([[[sign]] * 3, [[0.0]] * 3, [[0.0]] * 3]), m.b, m.c,
+                                   m.d, row=False)
+            assert mean * float(s0[0, 0]) == pytest.approx(expected, rel=1e-6)
+
+
+def test_frame_rotation_is_a_rotator_of_twice_the_angle():
+    k = np.array([[0.0], [0.0], [1.0]], F32)
+    x0 = np.array([[1.0], [0.0], [0.0]], F32)
+    for deg in (10.0, 30.0, 45.0, 90.0, 135.0):
+        a = math.radians(deg)
+        x1 = np.array([[math.cos(a)], [math.sin(a)], [0.0]], F32)
+        # Light polarised along x0: in frame x1 its axis is at -deg.
+        s = polar.rotate(np.array([[[1.0]] * 3, [[0.0]] * 3, [[0.0]] * 3], F32), x0, x1, k)
+        assert float(s[0, 0, 0]) == pytest.approx(math.cos(2 * a), abs=1e-6)
+        assert float(s[1, 0, 0]) == pytest.approx(-math.sin(2 * a), abs=1e-6)
+
+
+# -- scenes ---------------------------------------------------------------------------------------
+def _plate_scene(folder, thickness=4.76, emitter=None, analyser=None, strip=False, resolution=(4, 4),
+                 fov=(0.1, 0.1), polarisation=None, extra=None):
+    """A glass plate met at 67 deg reflecting an emitter into the eye (a windshield). ``strip``: a
+    3 mm strip 150 mm from the plate, whose primary and ghost images fall on different rows of a tall
+    view (with a thick plate); otherwise a 40 mm panel that covers every image. The emitter aims at
+    the eye's image in the plate (forward tracing); ``emitter`` adds fields to its emission block."""
+    sb = SceneBuilder(folder, "plate", "a glass plate reflecting an emitter")
+    theta = math.radians(67.0)
+    normal = np.array([0.0, -math.cos(theta), math.sin(theta)])
+    hit = np.array([0.0, 200.0, 0.0])
+    sb.add("plate", box(300.0, 300.0, thickness), {"type": "dielectric", "ior": N_GLASS},
+           frame_matrix(hit - 0.5 * thickness * normal, [1, 0, 0], normal))
+    gaze = np.array([0.0, 1.0, 0.0])
+    r = gaze - 2 * (gaze @ normal) * normal
+    center = hit + 150.0 * r
+    em = {"luminance": 1000.0, "aim": {"target": "eye_image", "share": 0.9}} | (emitter or {})
+    size = (40.0, 3.0) if strip else (40.0, 40.0)
+    sb.add("emitter", rectangle(*size)[:2], {"type": "absorber"}, frame_matrix(center, [1, 0, 0], -r), emission=em)
+    e_img = -2 * ((-hit) @ normal) * normal
+    sb.add("eye_image", disk(15.0, 64), {"type": "aperture"}, frame_matrix(e_img, [1, 0, 0], r))
+    for name, mesh, material, frame in extra or ():
+        sb.add(name, mesh, material, frame)
+    eye = {"position": [0.0, 0.0, 0.0], "gaze": gaze.tolist(), "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+           "accommodation_distance_mm": 350.0, "resolution": list(resolution), "fov_deg": list(fov)}
+    if analyser is not None:
+        eye["analyser"] = analyser
+    blocks = {"eye": eye} | ({"polarisation": polarisation} if polarisation else {})
+    return sb.write(**blocks)
+
+
+#: The emitter's polarisation: its local x is the world x, perpendicular to the plane of incidence (s).
+LIGHTS = {"unpolarised": None, "s": {"axis_deg": 0.0}, "p": {"axis_deg": 90.0}}
+
+
+def _expected_plate(light: str) -> float:
+    rs, rp = fresnel_angles(67.0)
+    ts, tp = plate_total(rs), plate_total(rp)
+    return 1000.0 * {"unpolarised": 0.5 * (ts + tp), "s": ts, "p": tp}[light]
+
+
+@pytest.mark.parametrize("light", list(LIGHTS))
+def test_every_method_sees_the_plate_reflect_each_polarisation_as_fresnel_says(tmp_path, light):
+    """The panel's luminance through the plate, L [R + T^2 R / (1 - R^2)] per polarisation (the mean of
+    s and p for unpolarised light), from backward, forward and photon tracing and the brightness-theorem
+    analysis (the field is 0.1 deg, over which R varies by 0.1 %)."""
+    pol = LIGHTS[light]
+    folder = _plate_scene(tmp_path / "p", emitter={"polarisation": pol} if pol else None)
+    world = World(load_scene(folder))
+    assert world.polarised
+    expected = _expected_plate(light)
+    pred = specular_paths(world, pupil_grid=4, seed=2)
+    total = sum(float((p["luminance"] @ Y_WEIGHTS).sum()) for p in pred["paths"]) / len(pred["pixels"])
+    assert total == pytest.approx(expected, rel=2e-3)
+    for method, rays in (("backward", 200_000), ("photon", 200_000), ("forward", 1_500_000)):
+        res = INTEGRATORS[method](world, 5).render(Budget(rays=rays))
+        y = res.film.rgb() @ Y_WEIGHTS
+        m, se = float(y.mean()), math.sqrt(float(res.film.variance_y().sum())) / y.size
+        assert abs(m - expected) < z_bound(3 * 3) * max(se, 1e-3 * expected), (method, m, expected, se)
+
+
+@pytest.mark.parametrize("light,ratio", [("unpolarised", None), ("s", None), ("p", None)])
+def test_ghost_ratio_of_a_flat_plate(tmp_path, light, ratio):
+    """The ghost (refract, reflect at the back, refract) over the primary (reflect) for the same eye ray,
+    from the analysis' chain factors: 0.576 for unpolarised light, 0.545 for s and 0.958 for p at 67 deg;
+    and the stochastic methods' two images (a strip seen through a 20 mm plate, the images on
+    different rows) agree with the analysis' prediction of the same rows."""
+    rs, rp = fresnel_angles(67.0)
+    closed = {"unpolarised": ((1 - rs) ** 2 * rs + (1 - rp) ** 2 * rp) / (rs + rp), "s": (1 - rs) ** 2,
+              "p": (1 - rp) ** 2}[light]
+    assert closed == pytest.approx({"unpolarised": 0.576, "s": 0.545, "p": 0.958}[light], abs=1e-3)
+    pol = LIGHTS[light]
+    world = World(load_scene(_plate_scene(tmp_path / "p", emitter={"polarisation": pol} if pol else None)))
+    chains = {p["path"]: p for p in specular_paths(world, stride=1)["paths"]}
+    primary = chains["plate:reflect > emitter"]
+    ghost = chains["plate:refract > plate:reflect > plate:refract > emitter"]
+    assert np.array_equal(primary["ray"], ghost["ray"])  # the same rays, each split at the first surface
+    y = lambda p: p["luminance"] @ Y_WEIGHTS  # noqa: E731
+    assert y(ghost) / y(primary) == pytest.approx(np.full(len(primary["ray"]), closed), rel=2e-3)
+
+    # The images apart: a strip through a thick plate.
+    strip = World(load_scene(_plate_scene(tmp_path / "s", 20.0, {"polarisation": pol} if pol else None, strip=True,
+                                          resolution=(4, 48), fov=(0.4, 6.0))))
+    pred = specular_paths(strip, pupil_grid=6, seed=3)
+    h, w = strip.eye.height, strip.eye.width
+    rows = {}
+    for p in pred["paths"]:
+        r = pred["pixels"][p["pixel"]] // w
+        rows[p["path"]] = np.bincount(r, weights=p["luminance"] @ Y_WEIGHTS, minlength=h)
+    prim_rows = rows["plate:reflect > emitter"]
+    ghost_rows = rows["plate:refract > plate:reflect > plate:refract > emitter"]
+    split = int(np.flatnonzero(prim_rows > 0).max()) + 1
+    assert split <= int(np.flatnonzero(ghost_rows > 0).min())  # apart
+    # (Not the closed form: the two images see the plate at incidence angles 2 deg apart, and R_p
+    # changes by a half over them.)
+    predicted = ghost_rows[split:].sum() / prim_rows[:split].sum()
+    for method, rays in (("backward", 400_000), ("forward", 4_000_000)):
+        res = INTEGRATORS[method](strip, 7).render(Budget(rays=rays))
+        img = res.film.rgb() @ Y_WEIGHTS
+        var = res.film.variance_y()
+        a, b = img[:split].sum(), img[split:].sum()
+        va, vb = var[:split].sum(), var[split:].sum()
+        got = b / a
+        se = got * math.sqrt(va / a**2 + vb / b**2)
+        assert abs(got - predicted) < z_bound(3 * 2) * se + 2e-3 * predicted, (method, got, predicted, se)
+
+
+def _direct_panel(folder, analyser, pol=None, film=None, lambertian=False):
+    """The eye looks straight at an emitting panel 200 mm away (or at a Lambertian panel lit by a
+    polarised emitter beside the eye), through an optional half-wave film, with an analyser."""
+    sb = SceneBuilder(folder, "panel", "a panel seen through an analyser")
+    em = {"luminance": 1000.0, "aim": {"target": "eye", "share": 0.9}}
+    if pol is not None:
+        em["polarisation"] = pol
+    extra_eye = {"analyser": analyser} if analyser is not None else {}
+    if lambertian:
+        sb.add("panel", rectangle(80.0, 80.0)[:2], {"type": "lambertian", "reflectance": 0.8,
+                                                     "aim": {"target": "eye", "share": 0.9}},
+               frame_matrix([0, 200.0, 0], [1, 0, 0], [0, -1, 0]))
+        sb.add("lamp", rectangle(20.0, 20.0)[:2], {"type": "absorber"},
+               frame_matrix([0, 100.0, -60.0], [1, 0, 0], [0, 0.6, 0.8]), emission=em | {"aim": {"target": "panel",
+                                                                                                  "share": 0.9}})
+    else:
+        sb.add("panel", rectangle(80.0, 80.0)[:2], {"type": "absorber"},
+               frame_matrix([0, 200.0, 0], [1, 0, 0], [0, -1, 0]), emission=em)
+    if film is not None:
+        sb.add("film", rectangle(60.0, 60.0)[:2], {"type": "retarder", "axis_deg": film},
+               frame_matrix([0, 100.0, 0], [1, 0, 0], [0, -1, 0]))
+    return sb.write(eye={"position": [0.0, 0.0, 0.0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                         "resolution": [4, 4], "fov_deg": [2.0, 2.0]} | extra_eye)
+
+
+def _mean(world, method, rays, seed=3):
+    res = INTEGRATORS[method](world, seed).render(Budget(rays=rays))
+    y = res.film.rgb() @ Y_WEIGHTS
+    return float(y.mean()), math.sqrt(float(res.film.variance_y().sum())) / y.size
+
+
+def test_malus_law_through_the_analyser(tmp_path):
+    """Light polarised at angle a to the analyser's axis passes t_along cos^2 a + t_across sin^2 a
+    (Malus), in backward and forward tracing and the analysis; unpolarised light (t_along + t_across) / 2."""
+    analyser = {"axis_deg": 0.0, "transmittance_along": 0.9, "transmittance_across": 0.02}
+    cases = [(a, 1000.0 * (0.9 * math.cos(math.radians(a)) ** 2 + 0.02 * math.sin(math.radians(a)) ** 2))
+             for a in (0.0, 30.0, 60.0, 90.0)] + [(None, 1000.0 * 0.46)]
+    for k, (angle, expected) in enumerate(cases):
+        folder = _direct_panel(tmp_path / f"m{k}", analyser, {"axis_deg": angle} if angle is not None else None)
+        world = World(load_scene(folder))
+        pred = specular_paths(world, stride=1)
+        assert float(pred["paths"][0]["luminance"] @ Y_WEIGHTS @ np.ones(16) / 16) == pytest.approx(expected, rel=1e-5)
+        for method, rays in (("backward", 20_000), ("forward", 300_000)):
+            m, se = _mean(world, method, rays)
+            assert abs(m - expected) < z_bound(2 * len(cases)) * se + 1e-5 * expected, (angle, method, m, expected)
+
+
+def test_half_wave_film_rotates_the_axis(tmp_path):
+    """A half-wave film with its fast axis at f turns light polarised at 0 to 2 f: through an analyser at
+    b the eye sees L cos^2(2 f - b)."""
+    analyser = {"axis_deg": 45.0, "transmittance_along": 1.0, "transmittance_across": 0.0}
+    for k, f in enumerate((0.0, 22.5, 45.0, 67.5)):
+        world = World(load_scene(_direct_panel(tmp_path / f"h{k}", analyser, {"axis_deg": 0.0}, film=f)))
+        expected = 1000.0 * math.cos(math.radians(2 * f - 45.0)) ** 2
+        pred = specular_paths(world, stride=1)
+        got = sum(float((p["luminance"] @ Y_WEIGHTS).sum()) for p in pred["paths"]) / 16
+        assert got == pytest.approx(expected, rel=1e-4, abs=1e-3)
+        m, se = _mean(world, "backward", 20_000)
+        assert abs(m - expected) < z_bound(4) * se + 1e-4 * 1000, (f, m, expected)
+
+
+def test_lambertian_surface_depolarises(tmp_path):
+    """A Lambertian panel lit by polarised light looks the same through an analyser at any angle: half of
+    the unanalysed luminance (next-event estimation, the paths' own hits and forward tracing)."""
+    values = {}
+    for k, axis in enumerate((None, 0.0, 90.0)):
+        analyser = None if axis is None else {"axis_deg": axis}
+        world = World(load_scene(_direct_panel(tmp_path / f"l{k}", analyser, {"axis_deg": 0.0}, lambertian=True)))
+        assert world.polarised
+        values[axis] = {m: _mean(world, m, r, seed=4 + k) for m, r in (("backward", 40_000), ("forward", 2_000_000))}
+    zb = z_bound(4)
+    for method in ("backward", "forward"):
+        base, se_base = values[None][method]
+        assert base > 0
+        for axis in (0.0, 90.0):
+            m, se = values[axis][method]
+            assert abs(m - 0.5 * base) < zb * math.hypot(se, 0.5 * se_base), (method, axis, m, base)
+
+
+def test_lcd_polariser_and_sunglasses_on_hud_direct(preset):
+    """hud-direct's variants (presets/hud_direct_polarised.py) by the analysis: an s-polarised LCD makes the
+    primary image Rs / ((Rs + Rp) / 2) = 1.85 times as bright as the unpolarised one (within the field's
+    spread of incidence angles) and the ghost ratio (1 - Rs)^2; sunglasses block it; a half-wave film
+    at 45 deg gives p light, (1 - Rp)^2, which they pass."""
+    out = {}
+    for name in ("hud-direct", "hud-direct-s", "hud-direct-s-sunglasses", "hud-direct-film-sunglasses"):
+        world = World(load_scene(preset(name, resolution=(60, 20))))
+        assert world.polarised
+        out[name] = {}
+        for p in specular_paths(world, stride=2)["paths"]:
+            if np.all(np.isnan(p["lcd"])):
+                continue
+            # The chain's product of reflectances and transmittances, the LCD cell's modulation taken
+            # out, per ray: (ray -> factor).
+            out[name][p["path"]] = dict(zip(p["ray"].tolist(), (p["factor"] / p["lcd"]).tolist(), strict=True))
+    prim = "windshield:reflect > mirror:reflect > lcd:transmit > scatterer:scatter"
+    ghost = ("windshield:refract > windshield:reflect > windshield:refract > mirror:reflect > lcd:transmit > "
+             "scatterer:scatter")
+    film = lambda p: p.replace("lcd:transmit", "half_wave_film:transmit > lcd:transmit")  # noqa: E731
+
+    def ratio(name, a, b):
+        """The median over the rays that have both chains of factor(a) / factor(b)."""
+        fa, fb = out[name][a], out[name].get(b, {})
+        both = [r for r in fa if r in fb and fb[r] > 0]
+        assert len(both) > 50, (name, a, b)
+        return float(np.median([fa[r] / fb[r] for r in both]))
+
+    rs, rp = fresnel_angles(67.0)
+    unpol = ((1 - rs) ** 2 * rs + (1 - rp) ** 2 * rp) / (rs + rp)
+    assert {k: round(v, 3) for k, v in {"unpol": unpol, "s": (1 - rs) ** 2, "p": (1 - rp) ** 2}.items()} == {
+        "unpol": 0.576, "s": 0.545, "p": 0.958}
+    # Over the view the windshield is met at 67 +- 1.5 deg, so the median ray is close to 67 deg.
+    assert ratio("hud-direct", ghost, prim) == pytest.approx(unpol, rel=0.02)
+    assert ratio("hud-direct-s", ghost, prim) == pytest.approx((1 - rs) ** 2, rel=0.02)
+    fs = "hud-direct-film-sunglasses"
+    assert ratio(fs, film(ghost), film(prim)) == pytest.approx((1 - rp) ** 2, rel=0.02)
+    # An s LCD: the primary image Rs / ((Rs + Rp) / 2) as bright as with unpolarised light (the same rays).
+    s_over_unpol = [out["hud-direct-s"][prim][r] / v for r, v in out["hud-direct"][prim].items()]
+    assert float(np.median(s_over_unpol)) == pytest.approx(rs / (0.5 * (rs + rp)), rel=0.02)
+    # Sunglasses block s light; with the film they pass p light: Rp / Rs of the s image without them.
+    assert max(out["hud-direct-s-sunglasses"].get(prim, {0: 0.0}).values()) < 2e-3 * max(
+        out["hud-direct-s"][prim].values())
+    p_over_s = [out[fs][film(prim)][r] / v for r, v in out["hud-direct-s"][prim].items() if r in out[fs][film(prim)]]
+    assert float(np.median(p_over_s)) == pytest.approx(rp / rs, rel=0.1)
+
+
+def test_forward_and_backward_agree_on_the_polarised_variants(preset):
+    """Both methods estimate the same symbol luminance on hud-direct-s and hud-direct-film-sunglasses."""
+    for name in ("hud-direct-s", "hud-direct-film-sunglasses"):
+        world = World(load_scene(preset(name, resolution=(60, 20))))
+        means = {m: _mean(world, m, r, seed=11) for m, r in (("backward", 400_000), ("forward", 3_000_000))}
+        (a, sa), (b, sb) = means["backward"], means["forward"]
+        assert abs(a - b) < z_bound(2) * math.hypot(sa, sb), (name, means)
+
+
+# -- what needs polarisation, and bad input --------------------------------------------------------
+def test_scenes_without_a_polarising_element_carry_nothing(preset, tmp_path):
+    for name in ("analytic-mirror", "analytic-disk", "hud-screen"):
+        scene = load_scene(preset(name))
+        if any(o.material.type == "dielectric" for o in scene.objects):
+            continue
+        assert World(scene).polar is None, name
+    # A retarder film alone does nothing to unpolarised light: nothing is carried.
+    folder = _direct_panel(tmp_path / "f", None, None, film=30.0)
+    assert World(load_scene(folder)).polar is None
+    # "off" is the unpolarised Fresnel average of an RGB renderer: the plate reflects (1 - R)^2 ghosts.
+    folder = _plate_scene(tmp_path / "o", polarisation="off")
+    world = World(load_scene(folder))
+    assert world.polar is None
+    rs, rp = fresnel_angles(67.0)
+    r = 0.5 * (rs + rp)
+    m, se = _mean(world, "backward", 100_000)
+    assert abs(m - 1000.0 * plate_total(r)) < z_bound(1) * se + 2e-3 * m
+
+
+def _edit(folder, fn):
+    edit_json(folder, fn)
+    return folder
+
+
+@pytest.mark.parametrize("edit,field", [
+    (lambda d: d.update(polarisation="partly"), "polarisation"),
+    (lambda d: (d.update(polarisation="off"), d["eye"].update(analyser={})), "eye.analyser"),
+    (lambda d: d["eye"].update(analyser={"axis_deg": 90, "transmittance_along": 1.5}),
+     "eye.analyser.transmittance_along"),
+    (lambda d: d["eye"].update(analyser={"axis": 90}), "eye.analyser.axis"),
+    (lambda d: d["objects"][1]["emission"].update(polarisation={"axis_deg": 0, "degree": 2}),
+     "objects[1].emission.polarisation.degree"),
+    (lambda d: (d.update(polarisation="off"), d["objects"][1]["emission"].update(polarisation={"axis_deg": 0})),
+     "objects[1].emission.polarisation"),
+    (lambda d: d["objects"][0].update(material={"type": "coating", "reflectance_s": 0.5, "reflectance_p": 0.2,
+                                                "transmittance_s": 0.6, "transmittance_p": 0.5}),
+     "objects[0].material"),
+    (lambda d: d["objects"][0].update(material={"type": "coating", "reflectance_s": 0.5, "reflectance": 0.2,
+                                                "transmittance": 0.6}), "objects[0].material"),
+    (lambda d: d["objects"][0].update(material={"type": "mirror", "reflectance": 0.9, "metal": {}}),
+     "objects[0].material.metal.complex_ior"),
+    (lambda d: d["objects"][0].update(material={"type": "retarder", "retardance_deg": 90}),
+     "objects[0].material.axis_deg"),
+])
+def test_bad_polarisation_input_names_the_field(tmp_path, edit, field):
+    folder = _edit(_plate_scene(tmp_path / "b"), edit)
+    with pytest.raises(SceneError) as e:
+        load_scene(folder)
+    assert e.value.field == field, str(e.value)
+    assert "scene.json" in str(e.value)
+
+
+def test_lcds_need_polarisers_on_all_or_none(preset):
+    folder = preset("hud-direct-s")
+
+    def add_lcd(d):
+        lcd = next(o for o in d["objects"] if o["name"] == "lcd")
+        d["objects"].append(json.loads(json.dumps(lcd)) | {"name": "lcd_2"})
+        d["objects"][-1]["material"].pop("polariser")
+
+    edit_json(folder, add_lcd)
+    with pytest.raises(SceneError) as e:
+        load_scene(folder)
+    assert e.value.field.endswith(".material.polariser") and "every LCD" in str(e.value)
+
+
+def test_scene_object_axes_follow_the_transform():
+    o = SceneObject("x", 0, np.zeros((3, 3)), np.zeros((1, 3), np.int64), None, local_x=np.array([0.0, 1.0, 0.0]),
+                    local_y=np.array([0.0, 0.0, 1.0]))
+    assert o.axis(90.0) == pytest.approx([0.0, 0.0, 1.0], abs=1e-12)
+    assert o.axis(45.0) == pytest.approx([0.0, math.sqrt(0.5), math.sqrt(0.5)])
+
+
+def test_polarised_variants_are_presets():
+    for name in ("hud-direct-s", "hud-direct-s-sunglasses", "hud-direct-film-sunglasses"):
+        assert name in PRESETS
+
+
+@pytest.mark.parametrize("mode", [RADIANCE, IMPORTANCE])
+def test_scatter_conserves_the_degree_of_polarisation_bound(mode):
+    """|S1..S3| <= S0 after any chain of Fresnel interactions (a physical Stokes vector, or a physical
+    detector row), here 50 random reflections and refractions."""
+    rng = np.random.default_rng(0)
+    mat = Dielectric([_Obj({"ior": N_GLASS, "ior_outside": 1.0})])
+
+    class W:  # the least of a world the transport needs
+        scene = type("S", (), {"objects": []})()
+
+    tr = polar.Transport(W(), type("E", (), {"analyser": None})())
+    n = 256
+    beta = np.ones((3, n), F32)
+    d = rng.normal(size=(3, n)).astype(F32)
+    d /= np.linalg.norm(d, axis=0)
+    extra = {"stokes": np.zeros((3, 3, n), F32), "frame": polar.any_frame(d)}
+    extra["stokes"][0] = 0.7  # partly polarised to start
+    for _ in range(50):
+        ng = rng.normal(size=(3, n)).astype(F32)
+        ng /= np.linalg.norm(ng, axis=0)
+        ng = np.where((ng * d).sum(axis=0) < 0, ng, -ng)
+        it = Interaction(d, np.zeros((3, n)), ng, ng, None, np.zeros(n, np.int64))
+        s = mat.sample(it, rng.random((1, n)).astype(F32), mode)
+        beta, stokes, frame = tr.scatter(beta, extra, it, mat, s.wo, s.weight, s.flags, mode == IMPORTANCE)
+        extra = {"stokes": stokes, "frame": frame}
+        d = s.wo
+        norm = np.sqrt((stokes * stokes).sum(axis=0))
+        assert np.all(norm <= beta * (1 + 1e-4) + 1e-6)
+        assert np.all(np.abs((frame * d).sum(axis=0)) < 1e-4)  # the frame stays perpendicular
