@@ -13,7 +13,7 @@ from mathutils import Matrix
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
-from ..tracer.scene import LEGACY_EMITTER, load_scene
+from ..tracer.scene import ANALYSER, LEGACY_EMITTER, load_scene
 from . import schema_ui
 from .units import unit_mm
 
@@ -143,14 +143,17 @@ def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]
     raw_methods |= {name: sc.raw[name] for name in ("forward", "backward") if name in sc.raw}
     for name, block in raw_methods.items():
         schema_ui.apply(scene.hud, INTEGRATORS[name].options, block, f"{name}_", (), Path(sc.root), by_name)
-    _build_eye(sc.eye, scene, coll, unit)
+    scene.hud.polarisation = sc.polarisation
+    _build_eye(sc.eye, sc.raw["eye"], scene, coll, unit)
     _build_world(sc, scene)
     if not sc.environment.is_black:  # a HUD against an environment: the hybrid method's two channels
         scene.hud.method = "hybrid"
     return created, removed
 
 
-def _build_eye(eye, scene, coll, unit):
+def _build_eye(eye, raw_eye: dict, scene, coll, unit):
+    """The eye camera from the scene's EyeSpec ``eye`` and its scene.json block ``raw_eye`` (the
+    analyser, through its schema)."""
     cam_data = bpy.data.cameras.new("Eye")
     cam_data.sensor_fit = "HORIZONTAL"
     cam_data.sensor_width = 36.0
@@ -164,6 +167,7 @@ def _build_eye(eye, scene, coll, unit):
     cam_data.hud.focal_length_mm = eye.focal_length_mm
     acc = eye.accommodation_distance_mm
     cam_data.hud.accommodation_distance_mm = 0.0 if math.isinf(acc) else acc
+    schema_ui.apply(cam_data.hud, (ANALYSER,), raw_eye)
     cam = bpy.data.objects.new("Eye", cam_data)
     cam[TAG] = coll[TAG]
     right = np.cross(eye.gaze, eye.up)

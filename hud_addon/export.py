@@ -36,6 +36,7 @@ from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.outputs import replace_folder
+from ..tracer.scene import ANALYSER
 from . import schema_ui
 from .units import unit_mm
 
@@ -241,9 +242,10 @@ def methods_spec(scene) -> dict:
 
 def eye_spec(scene, depsgraph=None) -> dict:
     """The eye from the active camera, as ``depsgraph`` evaluates it (its frame: an animated camera
-    moves the eye): position, gaze (-Z), up (+Y), field from lens and sensor. Raises ValueError when
-    the scene has no active camera, or one the eye cannot be (orthographic or panoramic, or with a
-    shifted lens), naming the camera (issue 11, finding 6)."""
+    moves the eye): position, gaze (-Z), up (+Y), field from lens and sensor; pupil, focus and the
+    analyser (polarised sunglasses) from its HUD Eye settings. Raises ValueError when the scene has no
+    active camera, or one the eye cannot be (orthographic or panoramic, or with a shifted lens),
+    naming the camera (issue 11, finding 6)."""
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
         raise ValueError("the scene needs an active camera: it is the eye")
@@ -285,6 +287,7 @@ def eye_spec(scene, depsgraph=None) -> dict:
             eye["adaptation_luminance_cd_m2"] = "image"
         elif hud.adaptation_luminance > 0:
             eye["adaptation_luminance_cd_m2"] = hud.adaptation_luminance
+    eye |= schema_ui.export(hud, (ANALYSER,))  # "analyser": {...} when HUD Eye > Analyser is on
     return eye
 
 
@@ -577,7 +580,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     data = {"format": "hud-scene", "version": 1, "name": scene.name,
             "description": f"exported from Blender {bpy.app.version_string}",
             "eye": eye, "environment": environment, "objects": objects,
-            "methods": methods_spec(scene)}
+            "polarisation": scene.hud.polarisation, "methods": methods_spec(scene)}
     text = json.dumps(data, indent=2) + "\n"
 
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -608,6 +611,10 @@ _SUN_TERMS = {"direction": "rotation", "illuminance_lux": "HUD Sun > Illuminance
               "color": "Color"}
 
 
+#: How the tracer says, in scene.json's terms, that an element needs polarisation on (tracer.scene).
+_POLARISATION_OFF = re.compile(r'remove "polarisation": "off"(?: \(or this block\))?')
+
+
 def _image_hint(image) -> str:
     if image is not None and image.source == "GENERATED" and image.packed_file is None:
         return (f" (image {image.name!r} is a generated image that is not packed: Blender does not save its pixels "
@@ -625,6 +632,8 @@ def blender_terms(error, folder: Path, scene) -> str:
     except (OSError, ValueError):
         data = {}
     field, message = error.field, _EXPORT_FILE.sub("", error.message)
+    message = _POLARISATION_OFF.sub("set Render Properties > HUD Tracer > Polarisation to Auto (or change this)",
+                                    message)
     m = re.match(r"objects\[(\d+)\](?:\.(\w+))?(?:\.(\w+))?", field)
     hint = ""
     if m and int(m.group(1)) < len(data.get("objects", [])):
@@ -635,7 +644,7 @@ def blender_terms(error, folder: Path, scene) -> str:
         if block == "material" and key:
             schema = MATERIALS[entry["material"]["type"]].schema
             f = next((f for f in schema.fields if f.name == key), None)
-            where += f": {f.title if f else key}"
+            where += f": {f.title if f else 'HUD Optical Role' if key == 'type' else key}"
             if f is not None and f.kind == "image" and original is not None:
                 hint = _image_hint(getattr(original.hud, key, None))
         elif block == "emission":
@@ -656,6 +665,12 @@ def blender_terms(error, folder: Path, scene) -> str:
             hint = _image_hint(image)
     elif field.startswith("eye"):
         where = f"camera {scene.camera.name!r}" if scene.camera is not None else "camera"
+        if field.startswith("eye.analyser"):
+            key = field[len("eye.analyser"):].lstrip(".")
+            f = next((f for f in ANALYSER.fields if f.name == key), None)
+            where += f": HUD Eye > {ANALYSER.title}" + (f" > {f.title}" if f is not None else "")
+    elif field == "polarisation":
+        where = "Render Properties > HUD Tracer > Polarisation"
     elif field.startswith("methods."):
         method, _, option = field[len("methods."):].partition(".")
         where = f"Render Properties > HUD Tracer > {method.capitalize()} options{': ' + option if option else ''}"

@@ -73,11 +73,20 @@ class HUD_OT_export_scene(bpy.types.Operator):
         if not self.directory:
             self.report({"ERROR"}, "choose a folder")
             return {"CANCELLED"}
-        try:
+        scene = context.scene
+
+        def check(staged: Path):
             # The tracer's own validation runs on the staged folder: one that would not render never
-            # replaces an earlier export.
+            # replaces an earlier export. Its errors are told in Blender's terms (the object or setting,
+            # not the staged scene.json's path and JSON field).
+            try:
+                load_scene(staged)
+            except SceneError as e:
+                raise ValueError(blender_terms(e, staged, scene)) from None
+
+        try:
             folder = export_scene(context.evaluated_depsgraph_get(), Path(bpy.path.abspath(self.directory)),
-                                  check=load_scene)
+                                  check=check)
         except Exception as e:  # noqa: BLE001 - any failure is reported to the user; the folder is as it was
             self.report({"ERROR"}, f"HUD export failed: {e}")
             return {"CANCELLED"}

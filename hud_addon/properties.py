@@ -1,8 +1,9 @@
-"""Property groups: Scene.hud (render settings and every method's options), Object.hud (optical role,
-the material's fields, emission), Camera.hud (eye), World.hud (environment), Light.hud (a Sun light's
-illuminance: the environment's sun). One PointerProperty per datablock type. The fields of materials,
-of the emission block and of the methods' options come from the tracer's schemas
-(hud_addon/schema_ui.py), so a new material or option needs no change here."""
+"""Property groups: Scene.hud (render settings, the polarisation mode and every method's options),
+Object.hud (optical role, the material's fields, emission), Camera.hud (eye, with its analyser),
+World.hud (environment), Light.hud (a Sun light's illuminance: the environment's sun). One
+PointerProperty per datablock type. The fields of materials, of the emission block, of the eye's
+analyser and of the methods' options come from the tracer's schemas (hud_addon/schema_ui.py), so a
+new material or option needs no change here."""
 
 import bpy
 from bpy.props import (
@@ -19,6 +20,7 @@ from ..tracer.environment import SUN_ILLUMINANCE_LX
 from ..tracer.integrators import DEFAULT_METHOD, INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
+from ..tracer.scene import ANALYSER, POLARISATION_MODES
 from ..tracer.schema import check_consistent
 from .schema_ui import annotations
 from .units import angle_twin, length_twin
@@ -29,6 +31,22 @@ def _method_items(self, context):
     # first, so that it is the property's default).
     names = sorted(INTEGRATORS, key=lambda n: (n != DEFAULT_METHOD, n))
     return [(name, name.capitalize(), INTEGRATORS[name].summary) for name in names]
+
+
+#: Tooltips of the scene's polarisation modes (tracer.scene.POLARISATION_MODES).
+POLARISATION_TIPS = {
+    "auto": "Polarisation is carried (Stokes vectors) wherever an element of the scene polarises: Fresnel "
+            "reflection and refraction at glass, LCD output polarisers, retarder films, coatings given for s and p "
+            "light, metal mirrors, polarised emission and the eye's analyser",
+    "off": "Unpolarised light throughout: the unpolarised Fresnel average at glass (what RGB renderers do); a "
+           "scene with an element that needs polarisation (analyser, LCD polariser, retarder, s/p coating, metal "
+           "mirror, polarised emission) is refused",
+}
+
+
+def _polarisation_items() -> list[tuple[str, str, str]]:
+    return [(m, m.capitalize(), POLARISATION_TIPS.get(m, f"The tracer's polarisation mode {m!r}"))
+            for m in POLARISATION_MODES]
 
 
 ROLE_ITEMS = [("none", "None", "Not exported to the tracer")] + [
@@ -64,6 +82,10 @@ def _scene_annotations() -> dict:
         "seconds": FloatProperty(name="Seconds", default=10.0, min=0.01, description="Render time, s"),
         "rays": IntProperty(name="Rays", default=10_000_000, min=1, description="Ray segments to trace"),
         "seed": IntProperty(name="Seed", default=0, min=0, description="Seed of the random streams"),
+        "polarisation": EnumProperty(name="Polarisation", items=_polarisation_items(), default="auto",
+                                     description="Whether light carries its polarisation (scene.json "
+                                                 "\"polarisation\"): Auto where the scene polarises, Off for "
+                                                 "the unpolarised average"),
         # The eyebox sweep (HUD Readouts panel): lengths stored in mm, shown in the scene's units.
         "eyebox_half_width_mm": FloatProperty(name="Half width", default=60.0, min=0.0, max=1000.0,
                                               description="Eye offsets to the left and right of the camera, mm"),
@@ -157,6 +179,11 @@ class HudCameraSettings(bpy.types.PropertyGroup):
     accommodation_distance_mm_shown: length_twin("accommodation_distance_mm", "Accommodation",
                                                  "Distance the eye focuses at (a HUD's virtual image: 2 to 15 m); "
                                                  "0 means infinity", nonnegative=True)
+
+
+# The eye's analyser (polarised sunglasses, scene.json eye.analyser) from its schema group: analyser_use
+# and analyser_<field> (hud_addon/schema_ui.py's group convention).
+HudCameraSettings.__annotations__.update(annotations((ANALYSER,)))
 
 
 class HudWorldSettings(bpy.types.PropertyGroup):

@@ -102,7 +102,13 @@ def annotations(fields: tuple[Field, ...], prefix: str = "", alternatives=(), se
             if shown is not None:
                 out.setdefault(SHOWN.format(prefix + f.name), shown)
     if alternatives:
-        out.setdefault(f"{prefix}by", _alternative_enum(alternatives, fields, "Given by"))
+        by = _alternative_enum(alternatives, fields, "Given by")
+        if f"{prefix}by" in out and out[f"{prefix}by"].keywords["items"] != by.keywords["items"]:
+            # Blocks that share their properties by name (materials) share this enum too: two different
+            # sets of alternatives under one prefix would silently export the wrong fields of one of them.
+            raise ValueError(f"{prefix}by: two blocks under the prefix {prefix!r} have different alternatives "
+                             f"({out[f'{prefix}by'].keywords['items']} and {by.keywords['items']})")
+        out.setdefault(f"{prefix}by", by)
     return out
 
 
@@ -202,6 +208,8 @@ def apply(owner, fields, spec: dict, prefix: str = "", alternatives=(), root: Pa
         value = spec[f.name]
         name = prefix + f.name
         if f.kind == "group":
+            if value is None:  # an optional group given as null: not given
+                continue
             setattr(owner, f"{name}_use", True)
             apply(owner, f.fields, value, f"{name}_", f.alternatives, root, objects)
         elif f.kind == "image":

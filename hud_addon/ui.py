@@ -9,6 +9,7 @@ from ..tracer.hudfigures import readouts
 from ..tracer.integrators import INTEGRATORS
 from ..tracer.lights import EMISSION
 from ..tracer.optics.materials import MATERIALS
+from ..tracer.scene import ANALYSER
 from . import engine, operators, schema_ui
 
 ENGINE = "HUD_TRACER"
@@ -35,6 +36,7 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         col.prop(s, "budget")
         col.prop(s, "seconds" if s.budget == "SECONDS" else "rays")
         col.prop(s, "seed")
+        col.prop(s, "polarisation")
         if s.method in INTEGRATORS:
             box = col.box()
             box.label(text=f"{s.method.capitalize()} options")
@@ -171,6 +173,9 @@ class HUD_PT_eye(_HudPanel, bpy.types.Panel):
         col.prop(h, "adaptation")
         col.prop(h, "focal_length_mm_shown")
         col.prop(h, "accommodation_distance_mm_shown")
+        schema_ui.draw(col, h, (ANALYSER,))  # analyser_use, and its fields in a box when on
+        if h.analyser_use and context.scene.hud.polarisation == "off":
+            col.label(text="An analyser needs Render > HUD Tracer > Polarisation: Auto", icon="ERROR")
 
 
 class HUD_PT_world(_HudPanel, bpy.types.Panel):

@@ -793,6 +793,116 @@ def scenario_sun(out):
             "spec_direct": spec_direct}
 
 
+class _PropLayout:
+    """Stands in for a panel's layout: records the names of the properties drawn."""
+
+    def __init__(self, names):
+        self.names = names
+
+    def prop(self, owner, name, **kw):
+        self.names.append(name)
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "grid_flow"):
+            return lambda *a, **k: _PropLayout(self.names)
+        return lambda *a, **k: None
+
+
+def scenario_polarisation(out):
+    """The polarisation of the scene in Blender: hud-direct with its LCD's output polariser on, a
+    retarder film, a coating given for s and p light, a metal mirror, polarised emission, the eye's
+    analyser (axis 90, along 0.9, across 0.01) and Polarisation "auto": panels drawn, exported to
+    out/pol; with Polarisation "off" the export is refused and an F12-style export names the Blender
+    settings; out/pol built back with Add HUD Preset's build_scene; the hud-direct-s-sunglasses preset
+    added when the tracer has it."""
+    import types
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    pkg = f"{module}.hud_addon"
+    export_mod, build_mod, ui_mod = (sys.modules[f"{pkg}.{m}"] for m in ("export", "build", "ui"))
+    out = Path(out)
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    lcd = next(o for o in scene.objects if o.hud.role == "lcd")
+    lcd.hud.polariser_use, lcd.hud.polariser_axis_deg = True, 45.0
+    led = next(o for o in scene.objects if o.hud.emits)
+    led.hud.emission_polarisation_use = True
+    led.hud.emission_polarisation_axis_deg, led.hud.emission_polarisation_degree = 30.0, 0.5
+    extras = {}
+    for k, (name, role) in enumerate((("film", "retarder"), ("splitter", "coating"), ("metal", "mirror"))):
+        bpy.ops.mesh.primitive_plane_add(size=5.0, location=(1000.0 + 20.0 * k, 1000.0, 1000.0))
+        obj = extras[name] = bpy.context.object
+        obj.name, obj.hud.role = name, role
+    h = extras["film"].hud
+    h.transmittance, h.axis_deg, h.retardance_deg = (0.95, 0.95, 0.95), 22.5, 90.0
+    h = extras["splitter"].hud
+    h.by = "reflectance_s"
+    h.reflectance_s, h.reflectance_p = (0.3,) * 3, (0.1,) * 3
+    h.transmittance_s, h.transmittance_p = (0.6,) * 3, (0.8,) * 3
+    h = extras["metal"].hud
+    h.reflectance, h.metal_use, h.metal_complex_ior = (0.9, 0.9, 0.9), True, (1.2, 7.0)
+    eye = scene.camera.data.hud
+    eye.analyser_use = True
+    eye.analyser_axis_deg, eye.analyser_transmittance_along, eye.analyser_transmittance_across = 90.0, 0.9, 0.01
+    scene.hud.polarisation = "auto"
+    drawn = {}
+    for panel, ctx in (("eye", types.SimpleNamespace(camera=scene.camera.data, scene=scene)),
+                       ("render", types.SimpleNamespace(scene=scene)),
+                       *((name, types.SimpleNamespace(object=obj)) for name, obj in (("lcd", lcd), *extras.items()))):
+        names = drawn[panel] = []
+        cls = {"eye": ui_mod.HUD_PT_eye, "render": ui_mod.HUD_PT_render}.get(panel, ui_mod.HUD_PT_object)
+        cls.draw(types.SimpleNamespace(layout=_PropLayout(names)), ctx)
+    bpy.ops.hud.export_scene(directory=str(out / "pol"))
+    scene.hud.polarisation = "off"
+    try:
+        bpy.ops.hud.export_scene(directory=str(out / "off"))
+        refused = None
+    except RuntimeError as e:  # the operator's report
+        refused = str(e)
+    load_scene = sys.modules[f"{module}.tracer.scene"].load_scene
+    scene_error = sys.modules[f"{module}.tracer.errors"].SceneError
+    in_blender_terms = []  # what an F12 render says (the engine's export, then blender_terms)
+    for _ in range(2):
+        export_mod.export_scene(bpy.context.evaluated_depsgraph_get(), out / "off_unchecked")
+        try:
+            load_scene(out / "off_unchecked")
+            in_blender_terms.append(None)
+        except scene_error as e:
+            in_blender_terms.append(export_mod.blender_terms(e, out / "off_unchecked", scene))
+        # The next element that needs polarisation, once these are off: the retarder film.
+        eye.analyser_use = lcd.hud.polariser_use = led.hud.emission_polarisation_use = False
+    lcd_name = lcd.name
+    for obj in extras.values():
+        bpy.data.objects.remove(obj)
+    scene.hud.polarisation = "off"  # build_scene sets it back
+    build_mod.build_scene(out / "pol", bpy.context)
+    cam = scene.camera.data.hud
+    by_name = {o.name: o for o in scene.objects}
+    built = {"polarisation": scene.hud.polarisation,
+             "analyser": [cam.analyser_use, cam.analyser_axis_deg, cam.analyser_transmittance_along,
+                          cam.analyser_transmittance_across],
+             "lcd": [by_name[lcd_name].hud.polariser_use, by_name[lcd_name].hud.polariser_axis_deg],
+             "film": [by_name["film"].hud.role, by_name["film"].hud.axis_deg, by_name["film"].hud.retardance_deg],
+             "splitter": [by_name["splitter"].hud.by, list(by_name["splitter"].hud.reflectance_p)],
+             "metal": [by_name["metal"].hud.metal_use, list(by_name["metal"].hud.metal_complex_ior)]}
+    presets = sys.modules[f"{module}.presets"].PRESETS
+    sunglasses = None
+    if "hud-direct-s-sunglasses" in presets:
+        folder = presets["hud-direct-s-sunglasses"].write(out / "sunglasses")
+        bpy.ops.hud.add_preset(preset="hud-direct-s-sunglasses")
+        cam = scene.camera.data.hud
+        raw = json.loads((Path(folder) / "scene.json").read_text())
+        sunglasses = {"analyser": raw["eye"].get("analyser"), "raw_polarisation": raw.get("polarisation", "auto"),
+                      "built": {"use": cam.analyser_use, "axis_deg": cam.analyser_axis_deg,
+                                "transmittance_along": cam.analyser_transmittance_along,
+                                "transmittance_across": cam.analyser_transmittance_across},
+                      "polarisation": scene.hud.polarisation}
+    items = [(i.identifier, i.description) for i in scene.hud.bl_rna.properties["polarisation"].enum_items]
+    disable(module)
+    return {"drawn": drawn, "refused": refused, "in_blender_terms": in_blender_terms, "built": built,
+            "sunglasses": sunglasses, "lcd": lcd_name, "items": items}
+
+
 if __name__ == "__main__":
     name, *args = sys.argv[1:]
     result = globals()[f"scenario_{name}"](*args)

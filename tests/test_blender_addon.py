@@ -569,3 +569,67 @@ def test_a_study_preset_renders_in_blender_with_its_channels_and_its_eye(tmp_pat
     ch = read_multilayer(tmp_path / "study.exr")
     np.testing.assert_allclose(ch["ViewLayer.Combined.G"], ch["ViewLayer.HUD.G"] + ch["ViewLayer.Environment.G"],
                                rtol=1e-5, atol=1e-2)
+
+
+def test_polarisation_in_blender_eye_analyser_mode_and_polarising_materials(tmp_path):
+    """The polarisation of scene.json in Blender: the eye's analyser (HUD Eye > Analyser, from
+    tracer.scene.ANALYSER) and the scene's Polarisation mode (HUD Tracer render settings) export as
+    eye.analyser and "polarisation"; the polarising materials come from their schemas by themselves (a
+    retarder role, the LCD's output polariser group, a coating given for s and p light, a metal mirror,
+    polarised emission): drawn, exported, loaded by the tracer and built back by Add HUD Preset. With
+    Polarisation Off the export is refused in Blender's terms."""
+    res, _ = scenario("polarisation", tmp_path)
+    from tracer.scene import ANALYSER, POLARISATION_MODES, load_scene
+
+    # Panels: the analyser's toggle and fields, the mode, every new material field.
+    assert res["drawn"]["eye"][-4:] == ["analyser_use", "analyser_axis_deg_shown", "analyser_transmittance_along",
+                                        "analyser_transmittance_across"]
+    assert "polarisation" in res["drawn"]["render"]
+    assert {"polariser_use", "polariser_axis_deg_shown"} <= set(res["drawn"]["lcd"])
+    assert {"transmittance", "axis_deg_shown", "retardance_deg_shown"} <= set(res["drawn"]["film"])
+    assert {"by", "reflectance_s", "transmittance_p"} <= set(res["drawn"]["splitter"])
+    assert "reflectance" not in res["drawn"]["splitter"]  # the alternative not chosen is hidden
+    assert {"metal_use", "metal_complex_ior"} <= set(res["drawn"]["metal"])
+    assert [k for k, _ in res["items"]] == list(POLARISATION_MODES) and all(len(d) > 40 for _, d in res["items"])
+
+    data = json.loads((tmp_path / "pol" / "scene.json").read_text())
+    assert data["polarisation"] == "auto"
+    assert data["eye"]["analyser"] == {"axis_deg": pytest.approx(90.0), "transmittance_along": pytest.approx(0.9),
+                                       "transmittance_across": pytest.approx(0.01)}
+    assert set(data["eye"]["analyser"]) == {f.name for f in ANALYSER.fields}
+    objs = {o["name"]: o for o in data["objects"]}
+    assert objs[res["lcd"]]["material"]["polariser"] == {"axis_deg": pytest.approx(45.0)}
+    assert objs["film"]["material"] == {"type": "retarder", "transmittance": pytest.approx([0.95] * 3),
+                                        "axis_deg": pytest.approx(22.5), "retardance_deg": pytest.approx(90.0)}
+    splitter = objs["splitter"]["material"]
+    assert set(splitter) == {"type", "reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p"}
+    assert objs["metal"]["material"]["metal"] == {"complex_ior": pytest.approx([1.2, 7.0])}
+    polarised = [o["emission"]["polarisation"] for o in data["objects"] if "polarisation" in o.get("emission", {})]
+    assert polarised == [{"axis_deg": pytest.approx(30.0), "degree": pytest.approx(0.5)}]
+    sc = load_scene(tmp_path / "pol")
+    assert sc.polarisation == "auto" and sc.eye.analyser["transmittance_along"] == pytest.approx(0.9)
+    assert sc.object("film").material.type == "retarder"
+    assert sc.object(res["lcd"]).material.params["polariser"]["axis_deg"] == pytest.approx(45.0)
+
+    # Off: the export operator refuses (and leaves no folder); an F12 render says it in Blender's terms.
+    assert res["refused"] is not None and not (tmp_path / "off").exists()
+    analyser_msg, film_msg = res["in_blender_terms"]
+    for msg in (res["refused"], analyser_msg):
+        assert "camera 'Eye'" in msg and "Analyser" in msg and "Polarisation to Auto" in msg and "scene.json" not in msg
+    assert film_msg.startswith("object 'film': HUD Optical Role") and "Polarisation to Auto" in film_msg
+
+    # Add HUD Preset's builder: the exported folder back into Blender.
+    built = res["built"]
+    assert built["polarisation"] == "auto"
+    assert built["analyser"] == [True, pytest.approx(90.0), pytest.approx(0.9), pytest.approx(0.01)]
+    assert built["lcd"] == [True, pytest.approx(45.0)]
+    assert built["film"] == ["retarder", pytest.approx(22.5), pytest.approx(90.0)]
+    assert built["splitter"] == ["reflectance_s", pytest.approx([0.1] * 3)]
+    assert built["metal"] == [True, pytest.approx([1.2, 7.0])]
+    sunglasses = res["sunglasses"]
+    if sunglasses is not None:  # the tracer's preset of a HUD seen through polarised sunglasses
+        assert sunglasses["analyser"] is not None and sunglasses["built"]["use"] is True
+        for f in ANALYSER.fields:
+            expected = sunglasses["analyser"].get(f.name, f.default)
+            assert sunglasses["built"][f.name] == pytest.approx(expected, abs=1e-6), f.name
+        assert sunglasses["polarisation"] == sunglasses["raw_polarisation"]
