@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import sys
 import time
@@ -74,9 +75,18 @@ def reference(name: str, folder: Path, seconds: float, workers: int) -> dict:
 
 
 def scene_folder(name: str) -> Path:
-    """The preset's scene folder in benchmarks/cache/scenes/, written on first use."""
+    """The preset's scene folder in benchmarks/cache/scenes/, written on first use, with
+    ``"polarisation": "off"``: these charts compare transport (methods, and Mitsuba's RGB variants,
+    whose Fresnel is the unpolarised average) on one model of light; benchmarks/mitsuba_polarised.py
+    compares the polarised model with Mitsuba's polarised variant."""
     folder = CACHE / "scenes" / name
-    return folder if folder.exists() else PRESETS[name].write(folder)
+    scene_json = folder / "scene.json"
+    if not folder.exists():
+        PRESETS[name].write(folder)
+    data = json.loads(scene_json.read_text())
+    if data.get("polarisation") != "off":
+        scene_json.write_text(json.dumps(data | {"polarisation": "off"}, indent=1))
+    return folder
 
 
 def reference_seconds(name: str, ref_seconds: float) -> float:

@@ -1,11 +1,14 @@
 """Fingerprints of fixed-seed renders: the safety net of speed work.
 
-    .venv/bin/python benchmarks/fingerprint.py [--rays N] [--seed K] [--save FILE | --compare FILE]
+    .venv/bin/python benchmarks/fingerprint.py [--rays N] [--seed K] [--polarisation off] [--save FILE | --compare FILE]
 
 Renders every preset with every method variant (benchmarks/throughput.py's VARIANTS) for a budget in
 rays with a fixed seed on one process, and prints the film's image mean and a SHA-256 of its sums.
 A change that only makes the code faster must leave every fingerprint as it was (the same batches draw
 the same numbers and add them in the same order); ``--compare`` says which differ, and by how much.
+``--polarisation off`` writes every scene with ``"polarisation": "off"``: the unpolarised model of the
+releases before polarisation, which must give their fingerprints (and so must scenes that nothing in
+polarises, with the default).
 """
 
 from __future__ import annotations
@@ -30,12 +33,15 @@ from tracer.units import luminance  # noqa: E402
 from tracer.world import World  # noqa: E402
 
 
-def fingerprints(rays: int, seed: int) -> dict:
+def fingerprints(rays: int, seed: int, polarisation: str | None = None) -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in SINGLE_METHOD:
-            preset = PRESETS[name]
-            world = World(load_scene(preset.write(Path(tmp) / name)))
+            folder = PRESETS[name].write(Path(tmp) / name)
+            if polarisation is not None:
+                p = folder / "scene.json"
+                p.write_text(json.dumps(json.loads(p.read_text()) | {"polarisation": polarisation}))
+            world = World(load_scene(folder))
             for variant in VARIANTS:
                 res = make(world, variant, seed).render(Budget(rays=rays))
                 h = hashlib.sha256()
@@ -52,10 +58,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rays", type=int, default=1_500_000)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--polarisation", choices=("auto", "off"), help="the scenes' polarisation mode (their own: auto)")
     ap.add_argument("--save")
     ap.add_argument("--compare")
     args = ap.parse_args()
-    now = fingerprints(args.rays, args.seed)
+    now = fingerprints(args.rays, args.seed, args.polarisation)
     before = json.loads(Path(args.compare).read_text()) if args.compare else {}
     same = True
     for key, v in now.items():

@@ -314,11 +314,18 @@ def _black() -> dict:
 
 #: The fields of each material that :func:`bsdf` reads (checked against the schema at import).
 MAPPED_FIELDS = {
-    "mirror": {"reflectance"}, "dielectric": {"ior", "ior_outside"}, "coating": {"reflectance", "transmittance"},
+    "mirror": {"reflectance", "metal"}, "dielectric": {"ior", "ior_outside"},
+    "coating": {"reflectance", "transmittance", "reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p"},
     "absorber": set(), "aperture": set(), "lambertian": {"reflectance"},
     "lambertian_transmitter": {"reflectance", "transmittance"}, "diffuser": {"transmittance", "sigma_deg"},
-    "lcd": {"image", "image_encoding", "transmittance", "contrast_ratio"},
+    "lcd": {"image", "image_encoding", "transmittance", "contrast_ratio", "polariser"},
+    "retarder": {"transmittance", "axis_deg", "retardance_deg"},
 }
+
+
+class Unpolarised(ValueError):
+    """An element that the RGB variants cannot model (benchmarks/mitsuba_polarised.py compares the
+    polarised model with Mitsuba's polarised variant)."""
 
 
 def check_against_schema():
@@ -346,6 +353,15 @@ def bsdf(obj: SceneObject) -> dict:
     """The Mitsuba BSDF dict of a traced object's material (module docstring)."""
     m = obj.material
     p = m.params
+    polarising = (m.type == "retarder" or (m.type == "lcd" and p.get("polariser") is not None)
+                  or (m.type == "coating" and "reflectance_s" in p))
+    if polarising:
+        raise Unpolarised(f"{obj.name}: a {m.type} that polarises has no equivalent in Mitsuba's {VARIANT} variant")
+    if m.type == "mirror" and p.get("metal") is not None:
+        n, k = (float(x) for x in p["metal"]["complex_ior"])
+        r0 = abs((1 - complex(n, k)) / (1 + complex(n, k))) ** 2  # the tracer's reflectance is R(0)
+        return {"type": "twosided", "bsdf": {"type": "conductor", "eta": n, "k": k,
+                                             "specular_reflectance": _rgb(np.asarray(p["reflectance"]) / r0)}}
     if m.type == "mirror":
         return {"type": "twosided", "bsdf": {"type": "conductor", "material": "none",
                                              "specular_reflectance": _rgb(p["reflectance"])}}
@@ -407,6 +423,8 @@ def _shapes(obj: SceneObject) -> dict:
     uv = None if obj.uv is None else np.stack([obj.uv[:, 0], 1.0 - obj.uv[:, 1]], axis=1)
     if obj.emission is None or obj.emission.luminance <= 0:
         return {obj.name: _mesh(obj.name, obj.vertices, obj.faces, bsdf(obj), None, normals, uv)}
+    if obj.emission.polarisation is not None:
+        raise Unpolarised(f"{obj.name}: polarised emission has no equivalent in Mitsuba's {VARIANT} variant")
     emitter = {"type": "area", "radiance": _rgb(obj.emission.radiance)}
     if not obj.emission.two_sided:
         return {obj.name: _mesh(obj.name, obj.vertices, obj.faces, bsdf(obj), emitter, normals, uv)}
@@ -462,6 +480,8 @@ def sensor(scene: Scene) -> dict:
 
 def scene_dict(scene: Scene) -> dict:
     """The whole scene as a dict for ``mi.load_dict``: sensor, shapes (apertures left out), environment."""
+    if scene.eye.analyser is not None:
+        raise Unpolarised(f"the eye's analyser has no equivalent in Mitsuba's {VARIANT} variant")
     d = {"type": "scene", "eye": sensor(scene)}
     for obj in scene.traced_objects:
         d.update(_shapes(obj))
