@@ -3,7 +3,7 @@ polarises; hud-direct-s: an LCD polariser too) with Stokes vectors and, where th
 them (``"polarisation": "off"``, the unpolarised Fresnel average), and on a scene that needs none
 (analytic-mirror, where a render is the same code with or without the setting).
 
-    .venv/bin/python benchmarks/polarisation_cost.py [--seconds S] [--repeats R] [--out CSV]
+    .venv/bin/python benchmarks/polarisation_cost.py [--seconds S] [--repeats R] [--presets P ...] [--out CSV]
 
 One process, the same seeds, a time budget of S seconds per render; the figure is the time per ray
 segment (wall seconds over rays traced, the pilot and set-up left out), alternating polarised and
@@ -44,11 +44,14 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--presets", nargs="*", default=[name for name, _ in CASES])
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "polarisation_cost.csv")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, methods in CASES:
+            if name not in args.presets:
+                continue
             folder = PRESETS[name].write(Path(tmp) / name)
             on = World(load_scene(folder))
             p = folder / "scene.json"

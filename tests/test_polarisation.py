@@ -128,6 +128,13 @@ def test_total_internal_reflection_keeps_intensity_and_retards_by_born_and_wolf(
         # c + i d = 2 r_s conj(r_p) / (|r_s|^2 + |r_p|^2): its phase is the retardance.
         assert abs(math.atan2(float(d[0]), float(c[0]))) == pytest.approx(delta, abs=1e-5)
         assert float(c[0]) ** 2 + float(d[0]) ** 2 == pytest.approx(1.0, abs=1e-5)
+        # The material's own matrix for a ray inside the glass (arriving on the back of the surface).
+        it = _interaction(theta)
+        it = Interaction(it.d, it.p, -it.ng, -it.ns, None, it.slot)
+        m = Dielectric([_Obj({"ior": N_GLASS, "ior_outside": 1.0})]).mueller(it, it.d, it.d,
+                                                                             np.full(1, DELTA | REFLECTION, np.int8))
+        assert (float(m.b[0]), float(m.c[0]), abs(float(m.d[0]))) == pytest.approx(
+            (float(b[0]), float(c[0]), abs(float(d[0]))), abs=1e-5)
     rs, rp, _, _ = polar.amplitudes(np.array([math.cos(math.radians(54.6))]), 1 / 1.51)
     z = rs[0] * np.conj(rp[0])
     assert 2 * abs(math.atan2(z.imag, z.real)) == pytest.approx(math.pi / 2, abs=0.01)

@@ -463,6 +463,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
         figures = hud_figures(world, channels_y["hud"], channels_y.get("environment")) if "hud" in channels_y \
             else hud_figures(world, y)
     report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
+    report["polarisation"] = world.polarisation_report()
     report["hud"] = figures
     run_id = uuid.uuid4().hex
     report = {"run_id": run_id} | report

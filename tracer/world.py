@@ -76,6 +76,19 @@ class World:
             return None
         return Transport(self, eye)
 
+    def polarisation_report(self) -> dict:
+        """The report's account of polarisation: the scene's mode, whether paths carry Stokes vectors, and
+        the elements that make them needed (objects whose material polarises, polarised emitters, the
+        eye's analyser)."""
+        scene = self.scene
+        elements = [o.name for m in self.materials if m.polarising for o in m.objects]
+        elements += [f"{o.name} (polarised emission)" for o in scene.objects
+                     if o.emission is not None and o.emission.polarisation is not None]
+        if self.eye.spec.analyser is not None:
+            elements.append("eye (analyser)")
+        return {"mode": scene.polarisation, "stokes_vectors": self.polarised,
+                "polarising_elements": elements if scene.polarisation != "off" else []}
+
     @property
     def polarised(self) -> bool:
         """Whether paths carry Stokes vectors in this world."""

@@ -346,16 +346,16 @@ class BackwardTracer(Integrator, PathMethod):
         for v in nxt.extra.values():
             v[..., more] = v[..., rows]
         polar = self.world.polar if "stokes" in state.extra else None
-        sub = state.take(j) if polar is not None else None
-        it_j = it.take(j) if polar is not None else None
         for (wo, weight, flags, _label), at in zip(lobes, (rows, more), strict=True):
             w = np.take(wo, j, axis=1)
-            weight_j = np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
-            if polar is not None:
-                beta, nxt.extra["stokes"][..., at], nxt.extra["frame"][:, at] = polar.scatter(
-                    sub.beta, sub.extra, it_j, bsdf, w, weight_j, np.full(len(j), flags, np.int8), False)
+            if polar is not None:  # on every hit (most split), then the split ones taken
+                beta, stokes, frame = polar.scatter(state.beta, state.extra, it, bsdf, wo, weight,
+                                                    np.full(m, flags, np.int8), False)
+                beta = np.take(beta, j, axis=1)
+                nxt.extra["stokes"][..., at] = np.take(stokes, j, axis=-1)
+                nxt.extra["frame"][:, at] = np.take(frame, j, axis=1)
             else:
-                beta = beta0 * weight_j
+                beta = beta0 * np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
             nxt.o[:, at] = self.world.accel.spawn(p, ng, w, off)
             nxt.d[:, at], nxt.beta[:, at] = w, beta
             nxt.pdf[at], nxt.specular[at], nxt.alive[at] = 0, True, luminance3(beta) > 0

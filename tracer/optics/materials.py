@@ -98,6 +98,18 @@ def _reflection_frame(it: Interaction) -> np.ndarray:
     return it.cache["s_frame"]
 
 
+def _sp_real(a_s: np.ndarray, a_p: np.ndarray, at_zero: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(b, c, d) float32 of real amplitude coefficients (tracer.optics.polar.sp_from_amplitudes without
+    complex arithmetic); where both vanish, those of ``c = at_zero``."""
+    ps, pp = a_s * a_s, a_p * a_p
+    tot = ps + pp
+    zero = tot <= 0
+    inv = 1 / np.where(zero, 1, tot)
+    b = ((ps - pp) * inv).astype(F32)
+    c = np.where(zero, F32(at_zero), 2 * a_s * a_p * inv).astype(F32)
+    return b, c, np.zeros_like(b)
+
+
 #: The Mueller matrix of a reflection that keeps the light's polarisation (an ideal mirror's r_s = -1,
 #: r_p = 1 in the s/p frames of tracer.optics.polar): the flip of the p basis on reflection.
 IDEAL_REFLECTION = {"b": 0.0, "c": -1.0, "d": 0.0}
@@ -245,8 +257,19 @@ class Dielectric(BSDF):
         reciprocal, so camera paths and light paths share the matrices."""
         if "fresnel_sp" not in it.cache:
             side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-            rs, rp, ts, tp = amplitudes(cos_i, eta)
-            it.cache["fresnel_sp"] = (s_frame(it.d, n_face), sp_from_amplitudes(rs, rp), sp_from_amplitudes(ts, tp))
+            # Real amplitudes (float32) outside total internal reflection; its rays (r = 1) in complex.
+            den_s, den_p = cos_i + eta * cos_t, eta * cos_i + cos_t
+            ok_s, ok_p = den_s > 0, den_p > 0
+            rs = (cos_i - eta * cos_t) / np.where(ok_s, den_s, 1)
+            rp = (eta * cos_i - cos_t) / np.where(ok_p, den_p, 1)
+            ts, tp = 2 * cos_i / np.where(ok_s, den_s, 1), 2 * cos_i / np.where(ok_p, den_p, 1)
+            refl, refr = _sp_real(rs, rp, -1.0), _sp_real(ts, tp, 1.0)
+            tir = np.flatnonzero(r >= 1)
+            if len(tir):
+                a_s, a_p, _, _ = amplitudes(cos_i[tir], np.broadcast_to(eta, cos_i.shape)[tir])
+                for out, v in zip(refl, sp_from_amplitudes(a_s, a_p), strict=True):
+                    out[tir] = v
+            it.cache["fresnel_sp"] = (s_frame(it.d, n_face), refl, refr)
         x, refl, refr = it.cache["fresnel_sp"]
         is_r = (flags & REFLECTION) != 0
         b, c, d = (np.where(is_r, a, t) for a, t in zip(refl, refr, strict=True))
