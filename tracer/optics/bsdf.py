@@ -122,6 +122,8 @@ class BSDF:
     #: surfaces, s/p coatings, metals, polarisers). A world needs Stokes vectors only where some object
     #: does, or a source or the eye is polarised (tracer.optics.polar).
     polarising = False
+    #: Whether its Mueller matrices differ between the RGB channels (tracer.optics.polar.Transport).
+    chromatic_polarisation = False
 
     def __init__(self, objects: list):
         """``objects``: the scene objects (tracer.scene.SceneObject) of this material, with their

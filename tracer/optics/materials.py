@@ -329,6 +329,9 @@ class Coating(BSDF):
             self.r, self.t = 0.5 * (rs + rp), 0.5 * (ts + tp)
             self.sp_reflect = sp_from_powers(rs, rp, sign=-1.0)  # each (3, objects)
             self.sp_transmit = sp_from_powers(ts, tp)
+            #: The matrices differ by channel: paths need a polarisation state per channel.
+            self.chromatic_polarisation = any(float(np.ptp(a, axis=0).max()) > 1e-7
+                                              for a in (*self.sp_reflect, *self.sp_transmit))
         else:
             self.r, self.t = self.table("reflectance"), self.table("transmittance")
         yr, yt = luminance3(self.r), luminance3(self.t)

@@ -12,8 +12,11 @@ How the tracer carries it (in the manner of Mitsuba 3's polarised variants, Jako
 ``mitsuba/core/mueller.h``; Wilkie and Weidlich, "Polarised light in computer graphics", SIGGRAPH Asia
 2012 course, doi:10.1145/2407783.2407790):
 
-- a path's RGB weight ``beta`` is S0 (per channel), and ``extra["stokes"]`` (3, 3, n) holds S1..S3 per
-  channel in the frame ``extra["frame"]`` (3, n); Mueller matrices here are achromatic or per channel;
+- a path's RGB weight ``beta`` is S0 (per channel), and ``extra["stokes"]`` (3, C, n) holds the
+  normalised S1..S3 / S0 in the frame ``extra["frame"]`` (3, n): C = 1, one state for the three
+  channels, where every Mueller matrix of the scene is achromatic (Fresnel surfaces of one index,
+  metals, polarisers, retarders: the state then stays the same in every channel), C = 3 where a
+  coating's s/p values differ by channel;
 - light paths (forward tracing, photons) carry the Stokes vector of their light, S' = M S;
 - camera paths (backward tracing, the brightness-theorem analysis) carry the row vector that the
   detector applies to the light arriving along the path (its analyser's first Mueller row; (1, 0, 0,
@@ -189,8 +192,10 @@ class Transport:
     """What the path loop and the methods do with Stokes vectors in a world that needs them
     (``World.polar``; None elsewhere, so that unpolarised scenes pay nothing).
 
-    Per path: ``extra["stokes"]`` (3, 3, n) float32, S1..S3 per RGB channel, and ``extra["frame"]`` (3, n)
-    float32, perpendicular to the path's direction; S0 is the path's ``beta`` (module docstring).
+    Per path: ``extra["stokes"]`` (3, C, n) float32, the normalised S1..S3 / S0 (C = :attr:`channels`),
+    and ``extra["frame"]`` (3, n) float32, perpendicular to the path's direction; S0 is the path's
+    ``beta`` (module docstring). Normalised, an interaction of the form [[1, b, ...]] scales beta by
+    f = 1 + b s1 and the state by 1 / f.
     """
 
     KEYS = ("stokes", "frame")
@@ -198,6 +203,9 @@ class Transport:
     def __init__(self, world, eye):
         """``world``: the render world; ``eye``: its eye's spec (tracer.scene.EyeSpec)."""
         self.world = world
+        #: Channels of the normalised state: 1 where every Mueller matrix is achromatic, else 3.
+        self.channels = 3 if any(getattr(m, "chromatic_polarisation", False) for m in getattr(world, "materials", ())
+                                 ) else 1
         #: The analyser at the eye (polarised sunglasses): (axis (3,) world, row (m0, m1)) or None.
         self.analyser = None
         if eye.analyser is not None:
@@ -219,28 +227,29 @@ class Transport:
                 self.emit_degree[o.slot] = pol["degree"]
         self.polarised_emitters = bool(np.any(self.emit_degree > 0))
 
+    def _zero(self, n: int) -> np.ndarray:
+        return np.zeros((3, self.channels, n), F32)
+
     # -- path starts -----------------------------------------------------------------------------
     def start_light(self, beta: np.ndarray, wo: np.ndarray, slot: np.ndarray) -> dict:
-        """The extra arrays of particles of weight ``beta`` (3, n) leaving emitters ``slot`` (n,) along
-        ``wo``: their emitters' polarisation (none: unpolarised)."""
+        """The extra arrays of particles leaving emitters ``slot`` (n,) along ``wo``: their emitters'
+        polarisation (none: unpolarised)."""
         n = len(slot)
+        stokes = self._zero(n)
         if not self.polarised_emitters:
-            return {"stokes": np.zeros((3, 3, n), F32), "frame": any_frame(wo)}
-        axis = np.take(self.emit_axis, slot, axis=1)
-        frame = axis_frame(axis, wo)
-        stokes = np.zeros((3, 3, n), F32)
-        stokes[0] = beta * self.emit_degree[slot]
-        return {"stokes": stokes, "frame": frame}
+            return {"stokes": stokes, "frame": any_frame(wo)}
+        stokes[0] = self.emit_degree[slot]
+        return {"stokes": stokes, "frame": axis_frame(np.take(self.emit_axis, slot, axis=1), wo)}
 
     def start_camera(self, beta: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, dict]:
         """(beta, extra) of camera paths of weight ``beta`` (3, n) leaving the eye along ``d``: the eye's
         analyser row times beta (an unpolarised detector: (1, 0, 0, 0))."""
         n = d.shape[1]
-        stokes = np.zeros((3, 3, n), F32)
+        stokes = self._zero(n)
         if self.analyser is None:
             return beta, {"stokes": stokes, "frame": any_frame(d)}
         axis, (m0, m1) = self.analyser
-        stokes[0] = beta * F32(m1)
+        stokes[0] = m1 / m0 if m0 > 0 else 0.0
         return (beta * F32(m0)).astype(F32), {"stokes": stokes, "frame": axis_frame(axis, d)}
 
     # -- what sensors and sources see ------------------------------------------------------------
@@ -252,18 +261,18 @@ class Transport:
         axis, (m0, m1) = self.analyser
         c2, s2 = rotation(extra["frame"], axis_frame(axis, d), d)
         s1 = c2 * extra["stokes"][0] + s2 * extra["stokes"][1]
-        return m0 * beta + m1 * s1
+        return beta * (m0 + m1 * s1)
 
     def emitted(self, beta: np.ndarray, extra: dict, d: np.ndarray, slot: np.ndarray) -> np.ndarray:
         """The factor (3, n) that replaces ``beta`` when camera paths (row vectors) arriving along ``d``
-        meet emitters ``slot``: r . S_e / L_e = r0 + degree (r1 cos 2phi + r2 sin 2phi), phi the angle
-        of the emitter's axis in the path's frame."""
+        meet emitters ``slot``: r . S_e / L_e = r0 (1 + degree (s1 cos 2phi + s2 sin 2phi)), phi the
+        angle of the emitter's axis in the path's frame."""
         if not self.polarised_emitters:
             return beta
         degree = self.emit_degree[slot]
         k = -d  # the light travels toward the eye
         c2, s2 = rotation(extra["frame"], axis_frame(np.take(self.emit_axis, slot, axis=1), k), k)
-        return beta + degree * (c2 * extra["stokes"][0] + s2 * extra["stokes"][1])
+        return beta * (1 + degree * (c2 * extra["stokes"][0] + s2 * extra["stokes"][1]))
 
     # -- interactions ----------------------------------------------------------------------------
     def scatter(self, beta: np.ndarray, extra: dict, it, bsdf, wo: np.ndarray, weight, flags: np.ndarray,
@@ -277,22 +286,28 @@ class Transport:
         else:
             k_in, k_out = -wo, -it.d
         m = bsdf.mueller(it, k_in, k_out, flags)
-        w = np.asarray(weight, F32)
+        w = beta * np.asarray(weight, F32)
         if m is None:  # identity, the ray undeviated
-            return beta * w, stokes * w, frame
+            return w, stokes, frame
         if m.kind == DEPOLARISE:
-            return beta * w, np.zeros_like(stokes), any_frame(wo)
+            return w, np.zeros_like(stokes), any_frame(wo)
         if importance:
             rot = rotate(stokes, frame, m.x_in, k_in)
             new_frame = m.x_out
         else:
             rot = rotate(stokes, frame, m.x_out, k_out)
             new_frame = m.x_in
+        out = np.zeros_like(stokes)
         if m.kind == POLARISE:
-            if importance:
-                out = np.zeros_like(stokes)
-                out[0] = beta
-                return beta * w, out * w, new_frame
-            return (beta + rot[0]) * w, np.zeros_like(stokes), new_frame
-        s0, s = sp_apply(beta, rot, m.b, m.c, m.d, row=not importance)
-        return (s0 * w).astype(F32), (s * w).astype(F32), new_frame
+            if importance:  # fully polarised along the axis, whatever arrived
+                out[0] = 1
+                return w, out, new_frame
+            return w * np.maximum(1 + rot[0], 0), out, new_frame
+        s1, s2, s3 = rot
+        f = np.maximum(1 + m.b * s1, 0)
+        inv = np.where(f > 1e-12, 1 / np.where(f > 1e-12, f, 1), 0)
+        d = -m.d if not importance else m.d
+        out[0] = (m.b + s1) * inv
+        out[1] = (m.c * s2 + d * s3) * inv
+        out[2] = (m.c * s3 - d * s2) * inv
+        return (w * f).astype(F32), out, new_frame
