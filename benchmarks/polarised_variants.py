@@ -63,9 +63,10 @@ def main():
             sym = bt["symbol"]
             ghost = (bt.get("ghost") or {}).get("ratio_to_symbol")
             r, g = closed_forms(light)
-            rows.append(f"| {name} | {light} | {sym['rendered_cd_m2']:,.1f} ± {sym['standard_error_cd_m2']:,.1f} | "
-                        f"{sym['predicted_cd_m2']:,.1f} | {'' if ghost is None else f'{ghost:.3f}'} | {r:.4f} | "
-                        f"{'' if math.isnan(g) else f'{g:.3f}'} |")
+            blocked = math.isnan(g)  # the ghost of what is left is not a figure of the design
+            rows.append(f"| {name} | {light} | {sym['rendered_cd_m2']:,.4g} ± {sym['standard_error_cd_m2']:,.2g} | "
+                        f"{sym['predicted_cd_m2']:,.4g} | {'' if ghost is None or blocked else f'{ghost:.3f}'} | "
+                        f"{r:.4f} | {'' if blocked else f'{g:.3f}'} |")
             print(rows[-1], flush=True)
     text = "\n".join(rows)
     out = ROOT / "benchmarks" / "results" / "polarised_variants.md"

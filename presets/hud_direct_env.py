@@ -13,8 +13,9 @@ from .studies import make_study
 
 NAME = "hud-direct-env"
 SUMMARY = "hud-direct against the day panorama, symbols 10^4 cd/m^2 (paper Fig. 13)"
-#: hud-direct's symbols read 8,972 cd/m^2 (its brightness-theorem prediction, README): to 10^4.
-SYMBOL_SCALE = 1.0e4 / 8972.0
+#: hud-direct's symbols read 8,324 cd/m^2 (its brightness-theorem prediction with polarisation,
+#: README "Polarisation"): to 10^4.
+SYMBOL_SCALE = 1.0e4 / 8324.0
 
 
 def write(folder, pupil_mm: float = hud_direct.PUPIL_MM) -> Path:

@@ -14,8 +14,12 @@ from .studies import make_study
 
 NAME = "hud-screen-day"
 SUMMARY = "hud-screen against a day panorama (2140 cd/m^2 in view), symbols 1600 cd/m^2 (paper Fig. 8)"
-#: Symbol luminance of the study over hud-screen's (10^4 cd/m^2).
-SYMBOL_SCALE = 1600.0 / 1.0e4
+#: hud-screen's symbols as an eye in the studies' view sees them, cd/m^2 (hud-screen-night at scale 1,
+#: 120 s hybrid render, README; with the windshield's s and p light apart, 10 % below the 10^4 cd/m^2
+#: the preset was designed for with the unpolarised Fresnel average).
+HUD_SCREEN_SYMBOLS_CD_M2 = 9019.0
+#: Symbol luminance of the study over hud-screen's.
+SYMBOL_SCALE = 1600.0 / HUD_SCREEN_SYMBOLS_CD_M2
 #: The day panorama: Blender's "city", scaled so that the view averages the paper's adaptation
 #: luminance, turned by 0 deg (panorama, calibration, rotation_deg).
 DAY = ("city", {"mode": "view", "value": 2140.0}, 0.0)

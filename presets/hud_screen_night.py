@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import hud_screen
+from .hud_screen_day import HUD_SCREEN_SYMBOLS_CD_M2
 from .studies import make_study
 
 NAME = "hud-screen-night"
@@ -21,4 +22,4 @@ NIGHT = ("night", {"mode": "min", "value": 34.0}, 90.0)
 
 def write(folder, pupil_mm: float = hud_screen.PUPIL_MM) -> Path:
     hud_screen.write(folder, pupil_mm)
-    return make_study(folder, 1.0, *NIGHT, NAME, SUMMARY)
+    return make_study(folder, 1.0e4 / HUD_SCREEN_SYMBOLS_CD_M2, *NIGHT, NAME, SUMMARY)
