@@ -46,6 +46,11 @@ def closed_forms(light: str) -> tuple[float, float]:
     return rs, (1 - rs) ** 2
 
 
+def _cd(v: float) -> str:
+    """A luminance with its significant digits: 15,108, 8.3, 0.357."""
+    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=30.0)
@@ -64,8 +69,8 @@ def main():
             ghost = (bt.get("ghost") or {}).get("ratio_to_symbol")
             r, g = closed_forms(light)
             blocked = math.isnan(g)  # the ghost of what is left is not a figure of the design
-            rows.append(f"| {name} | {light} | {sym['rendered_cd_m2']:,.4g} ± {sym['standard_error_cd_m2']:,.2g} | "
-                        f"{sym['predicted_cd_m2']:,.4g} | {'' if ghost is None or blocked else f'{ghost:.3f}'} | "
+            rows.append(f"| {name} | {light} | {_cd(sym['rendered_cd_m2'])} ± {_cd(sym['standard_error_cd_m2'])} | "
+                        f"{_cd(sym['predicted_cd_m2'])} | {'' if ghost is None or blocked else f'{ghost:.3f}'} | "
                         f"{r:.4f} | {'' if blocked else f'{g:.3f}'} |")
             print(rows[-1], flush=True)
     text = "\n".join(rows)
