@@ -38,7 +38,8 @@ Most Mueller matrices of optics have the form (normalised)
 in a frame whose x is the element's axis (the s direction of a plane of incidence, a film's fast
 axis): diattenuation b = (T_x - T_y) / (T_x + T_y), and c, d from the amplitude ratio and the
 retardance. Fresnel reflection and refraction, metals, coatings, retarders and linear diattenuators
-(a polariser sheet, polarised sunglasses) all have it (:func:`sp_apply`); the LCD's output polariser,
+(a polariser sheet, polarised sunglasses) all have it (:func:`sp_apply` applies it to Stokes vectors;
+:meth:`Transport.scatter` to the normalised states paths carry); the LCD's output polariser,
 which passes a share of the light whatever its state and leaves it polarised along its axis, and
 depolarisation are the two other kinds.
 """
@@ -120,8 +121,9 @@ def rotate(stokes: np.ndarray, x_from: np.ndarray, x_to: np.ndarray, k: np.ndarr
 
 
 def sp_apply(s0: np.ndarray, stokes: np.ndarray, b, c, d, row: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the form [[1, b, 0, 0], [b, 1, 0, 0], [0, 0, c, d], [0, 0, -d, c]] to (s0 (C, n), S1..S3
-    (3, C, n)); ``row``: to a row vector from the right (r M), which transposes the retardance term."""
+    """Apply the form [[1, b, 0, 0], [b, 1, 0, 0], [0, 0, c, d], [0, 0, -d, c]] to Stokes vectors (s0 (C, n),
+    S1..S3 (3, C, n)), not normalised (what checks of a material's matrix use); ``row``: to a row vector
+    from the right (r M), which transposes the retardance term."""
     s1, s2, s3 = stokes
     if row:
         d = -d
