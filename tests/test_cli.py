@@ -24,7 +24,8 @@ def test_presets_listed_and_exported(tmp_path):
     assert out.returncode == 0
     names = [line.split()[0] for line in out.stdout.splitlines()]
     assert names == ["hud-direct", "hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser", "hud-screen-day",
-                     "hud-screen-night", "hud-direct-env", "analytic-mirror", "analytic-disk", "analytic-furnace"]
+                     "hud-screen-night", "hud-direct-env", "hud-direct-s", "hud-direct-s-sunglasses",
+                     "hud-direct-film-sunglasses", "analytic-mirror", "analytic-disk", "analytic-furnace"]
     for name in ("hud-direct", "hud-screen", "hud-direct-condenser"):
         assert hud_trace("export", name, tmp_path / name).returncode == 0
         assert (tmp_path / name / "scene.json").is_file() and (tmp_path / name / "textures" / "slide.png").is_file()
