@@ -520,8 +520,10 @@ def test_scatter_conserves_the_degree_of_polarisation_bound(mode):
 
     class W:  # the least of a world the transport needs
         scene = type("S", (), {"objects": []})()
+        materials = [mat]
+        eye = type("E", (), {"spec": type("Spec", (), {"analyser": None})()})()
 
-    tr = polar.Transport(W(), type("E", (), {"analyser": None})())
+    tr = polar.Transport(W())
     n = 256
     beta = np.ones((3, n), F32)
     d = rng.normal(size=(3, n)).astype(F32)

@@ -63,31 +63,29 @@ class World:
         #: Ray segments of a world without geometry (they all escape at once; counted as traced).
         self.rays_without_geometry = 0
 
-    def _polar(self, eye: EyeSpec | None = None):
-        """The polarised transport of this world, or None where nothing polarises: the scene's
-        ``polarisation`` is "off", or no material polarises (tracer.optics.bsdf.BSDF.polarising), no
-        emitter is polarised and the eye has no analyser."""
+    def _polarising_elements(self) -> list[str]:
+        """What makes this world need Stokes vectors: objects whose material polarises
+        (tracer.optics.bsdf.BSDF.polarising), polarised emitters, the eye's analyser; none with the
+        scene's ``polarisation`` "off"."""
         scene = self.scene
-        eye = eye if eye is not None else scene.eye
         if scene.polarisation == "off":
-            return None
-        emitters = any(o.emission is not None and o.emission.polarisation is not None for o in scene.objects)
-        if not (any(m.polarising for m in self.materials) or emitters or eye.analyser is not None):
-            return None
-        return Transport(self, eye)
-
-    def polarisation_report(self) -> dict:
-        """The report's account of polarisation: the scene's mode, whether paths carry Stokes vectors, and
-        the elements that make them needed (objects whose material polarises, polarised emitters, the
-        eye's analyser)."""
-        scene = self.scene
+            return []
         elements = [o.name for m in self.materials if m.polarising for o in m.objects]
         elements += [f"{o.name} (polarised emission)" for o in scene.objects
                      if o.emission is not None and o.emission.polarisation is not None]
         if self.eye.spec.analyser is not None:
             elements.append("eye (analyser)")
-        return {"mode": scene.polarisation, "stokes_vectors": self.polarised,
-                "polarising_elements": elements if scene.polarisation != "off" else []}
+        return elements
+
+    def _polar(self):
+        """The polarised transport of this world, or None where nothing needs it."""
+        return Transport(self) if self._polarising_elements() else None
+
+    def polarisation_report(self) -> dict:
+        """The report's account of polarisation: the scene's mode, whether paths carry Stokes vectors, and
+        the elements that make them needed."""
+        return {"mode": self.scene.polarisation, "stokes_vectors": self.polarised,
+                "polarising_elements": self._polarising_elements()}
 
     @property
     def polarised(self) -> bool:
@@ -99,7 +97,7 @@ class World:
         other = copy.copy(self)
         other.eye = ThinLensEye(spec)
         other._targets = {k: v for k, v in self._targets.items() if k != "eye"}
-        other.polar = other._polar(spec)
+        other.polar = other._polar()
         return other
 
     def channel(self, lights: bool = True, environment: bool = True) -> World:

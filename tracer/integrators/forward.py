@@ -138,9 +138,10 @@ class ForwardTracer(Integrator, PathMethod):
             k, pix = k[ok], pix[ok]
             ctx.found += len(k)
             value = np.take(state.beta, k, axis=1)
-            if self.world.polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
-                value = self.world.polar.detect(value, {n: np.take(v, k, axis=-1) for n, v in state.extra.items()},
-                                                np.take(state.d, k, axis=1))
+            polar = self.world.polar
+            if polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
+                value = polar.detect(value, {key: np.take(state.extra[key], k, axis=-1) for key in polar.KEYS},
+                                     np.take(state.d, k, axis=1))
             ctx.splats.add("light", pix, state.rep[k], value / eye.extent[pix])
         return at
 

@@ -19,7 +19,7 @@ from ..schema import REQUIRED, Field, Schema
 from ..units import luminance3
 from ..vec import F32, dot, reflect
 from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
-from .fresnel import fresnel_unpolarized, refract
+from .fresnel import fresnel_amplitudes, refract, unpolarized_from_amplitudes
 from .polar import POLARISE, SP, Mueller, amplitudes, axis_frame, s_frame, sp_from_amplitudes, sp_from_powers
 
 #: The smallest positive value the float32 densities and probabilities are clamped to (1e-300 does
@@ -96,18 +96,6 @@ def _reflection_frame(it: Interaction) -> np.ndarray:
     if "s_frame" not in it.cache:
         it.cache["s_frame"] = s_frame(it.d, it.ns)
     return it.cache["s_frame"]
-
-
-def _sp_real(a_s: np.ndarray, a_p: np.ndarray, at_zero: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(b, c, d) float32 of real amplitude coefficients (tracer.optics.polar.sp_from_amplitudes without
-    complex arithmetic); where both vanish, those of ``c = at_zero``."""
-    ps, pp = a_s * a_s, a_p * a_p
-    tot = ps + pp
-    zero = tot <= 0
-    inv = 1 / np.where(zero, 1, tot)
-    b = ((ps - pp) * inv).astype(F32)
-    c = np.where(zero, F32(at_zero), 2 * a_s * a_p * inv).astype(F32)
-    return b, c, np.zeros_like(b)
 
 
 #: The Mueller matrix of a reflection that keeps the light's polarisation (an ideal mirror's r_s = -1,
@@ -215,8 +203,10 @@ class Dielectric(BSDF):
             n_t = np.where(front, n_in, n_out)
             cos_i = np.clip(-dot(it.d, n_face), 0.0, 1.0)
             eta = n_t / n_i
-            r, cos_t = fresnel_unpolarized(cos_i, eta)
+            rs, rp, cos_t, tir = fresnel_amplitudes(cos_i, eta)
+            r, cos_t = unpolarized_from_amplitudes(rs, rp, cos_t, tir)
             it.cache["fresnel"] = (side, n_face, eta, cos_i, r, cos_t)
+            it.cache["fresnel_amplitudes"] = (rs, rp)
         return it.cache["fresnel"]
 
     def _branches(self, it) -> tuple[np.ndarray, np.ndarray]:
@@ -257,13 +247,8 @@ class Dielectric(BSDF):
         reciprocal, so camera paths and light paths share the matrices."""
         if "fresnel_sp" not in it.cache:
             side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-            # Real amplitudes (float32) outside total internal reflection; its rays (r = 1) in complex.
-            den_s, den_p = cos_i + eta * cos_t, eta * cos_i + cos_t
-            ok_s, ok_p = den_s > 0, den_p > 0
-            rs = (cos_i - eta * cos_t) / np.where(ok_s, den_s, 1)
-            rp = (eta * cos_i - cos_t) / np.where(ok_p, den_p, 1)
-            ts, tp = 2 * cos_i / np.where(ok_s, den_s, 1), 2 * cos_i / np.where(ok_p, den_p, 1)
-            refl, refr = _sp_real(rs, rp, -1.0), _sp_real(ts, tp, 1.0)
+            rs, rp = it.cache["fresnel_amplitudes"]  # real; total internal reflection's phase below
+            refl, refr = sp_from_amplitudes(rs, rp), sp_from_amplitudes(1 + rs, (1 + rp) / eta)
             tir = np.flatnonzero(r >= 1)
             if len(tir):
                 a_s, a_p, _, _ = amplitudes(cos_i[tir], np.broadcast_to(eta, cos_i.shape)[tir])
@@ -357,7 +342,7 @@ class Coating(BSDF):
         if not self.polarising:
             if not np.any(is_r):
                 return None
-            return Mueller(SP, x, x, np.where(is_r, F32(0), F32(0)), np.where(is_r, F32(-1), F32(1)), F32(0))
+            return Mueller(SP, x, x, F32(0), np.where(is_r, F32(-1), F32(1)), F32(0))
         b, c, d = (np.where(is_r, self.gather(a, it), self.gather(t, it))
                    for a, t in zip(self.sp_reflect, self.sp_transmit, strict=True))
         return Mueller(SP, x, x, b, c, d)

@@ -202,21 +202,18 @@ class Transport:
 
     KEYS = ("stokes", "frame")
 
-    def __init__(self, world, eye):
-        """``world``: the render world; ``eye``: its eye's spec (tracer.scene.EyeSpec)."""
+    def __init__(self, world):
+        """``world``: the render world (its materials, scene objects and eye, tracer.eye.ThinLensEye)."""
         self.world = world
         #: Channels of the normalised state: 1 where every Mueller matrix is achromatic, else 3.
-        self.channels = 3 if any(getattr(m, "chromatic_polarisation", False) for m in getattr(world, "materials", ())
-                                 ) else 1
+        self.channels = 3 if any(m.chromatic_polarisation for m in world.materials) else 1
         #: The analyser at the eye (polarised sunglasses): (axis (3,) world, row (m0, m1)) or None.
         self.analyser = None
-        if eye.analyser is not None:
-            a = eye.analyser
+        eye = world.eye
+        if eye.spec.analyser is not None:
+            a = eye.spec.analyser
             theta = np.radians(a["axis_deg"])
-            right = np.cross(eye.gaze, eye.up)
-            right /= np.linalg.norm(right)
-            up = np.cross(right, eye.gaze)
-            self.analyser = (np.cos(theta) * right + np.sin(theta) * up,
+            self.analyser = (np.cos(theta) * eye.right + np.sin(theta) * eye.up,
                              analyser_row(a["transmittance_along"], a["transmittance_across"]))
         #: Emitters' linear polarisation by object slot: axis (3, slots) world and degree (slots,).
         slots = len(world.scene.objects)
