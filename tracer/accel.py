@@ -20,7 +20,7 @@ import numpy as np
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
-from .vec import F32, cross, dot, max3, norm
+from .vec import F32, cross, dot, max3, norm, take
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -123,7 +123,7 @@ class Accelerator:
     @staticmethod
     def _apply(table: np.ndarray, face: np.ndarray, p: np.ndarray) -> np.ndarray:
         """M p + c of the faces ``face`` at points ``p`` (3, n), (k, n)."""
-        t = np.take(table, face, axis=1)
+        t = take(table, face)
         k = t.shape[0] // 4
         return np.stack([t[3 * i] * p[0] + t[3 * i + 1] * p[1] + t[3 * i + 2] * p[2] + t[3 * k + i]
                          for i in range(k)])
@@ -150,18 +150,18 @@ class Accelerator:
             return Hits(np.zeros(0, np.int64), np.zeros(0))
         o32, d32 = self._rays32(o, d)
         face = self._scene.run(o32, d32, output=False).astype(np.int64)  # primID, -1 for a miss
-        ng = np.take(self.normal_ext, face, axis=1)  # face -1 (a miss) takes the zero column
+        ng = take(self.normal_ext, face)  # face -1 (a miss) takes the zero column
         denom = dot(d, ng)
         ok = np.abs(denom) > 1e-9
-        t = (np.take(self.plane, face) - (o[0] * ng[0] + o[1] * ng[1] + o[2] * ng[2])) / np.where(ok, denom, 1)
+        t = (take(self.plane, face) - (o[0] * ng[0] + o[1] * ng[1] + o[2] * ng[2])) / np.where(ok, denom, 1)
         if not ok.all():
             # Misses, and rays parallel to the plane they hit (t undefined there: the distance to the
             # triangle's first corner along the ray).
             graze = np.flatnonzero(~ok & (face >= 0))
             if len(graze):
                 f = face[graze]
-                v = np.take(self.v0, f, axis=1) - np.take(o, graze, axis=1)
-                t[graze] = dot(v, np.take(d, graze, axis=1).astype(np.float64))
+                v = take(self.v0, f) - take(o, graze)
+                t[graze] = dot(v, take(d, graze).astype(np.float64))
             t[face < 0] = np.inf
         return Hits(face, t)
 
@@ -178,8 +178,8 @@ class Accelerator:
 
     def barycentrics(self, face: np.ndarray, p: np.ndarray) -> np.ndarray:
         """(u, v), (2, n), of points ``p`` (3, n) on their triangles ``face`` (n,), in float64."""
-        e1, e2 = np.take(self.e1, face, axis=1), np.take(self.e2, face, axis=1)
-        w = p - np.take(self.v0, face, axis=1)
+        e1, e2 = take(self.e1, face), take(self.e2, face)
+        w = p - take(self.v0, face)
         d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
         w1, w2 = dot(w, e1), dot(w, e2)
         det = d11 * d22 - d12 * d12

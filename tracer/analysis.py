@@ -38,7 +38,7 @@ from .optics.bsdf import DELTA, RADIANCE
 from .optics.materials import LCD
 from .sampling import make_rng, uniform_disk_concentric
 from .units import luminance3
-from .vec import F32, dot, norm
+from .vec import F32, dot, norm, take
 
 #: The analysis drops branches whose transfer factor falls below this fraction (of the brightest
 #: source's luminance: the roulette's reference is MIN_FACTOR / Roulette.EPSILON of it). A chain
@@ -154,25 +154,25 @@ class ChiefRays(PathMethod):
                 k = np.arange(k0, min(k0 + step, qp.shape[1]))
                 ii = np.repeat(np.arange(m), len(k))
                 kk = np.tile(k, m)
-                p = np.take(it.p, ii, axis=1)
-                v = np.take(qp, kk, axis=1) - p
+                p = take(it.p, ii)
+                v = take(qp, kk) - p
                 dist = norm(v)
                 w = (v / dist).astype(F32)  # toward the light point
-                cos_e = -dot(w, np.take(qn, kk, axis=1))
-                o, d, tmax = segment_to(accel, p, np.take(it.ng, ii, axis=1), np.take(qp, kk, axis=1), it.offset[ii])
+                cos_e = -dot(w, take(qn, kk))
+                o, d, tmax = segment_to(accel, p, take(it.ng, ii), take(qp, kk), it.offset[ii])
                 blocked = accel.occluded(o, d, tmax)
                 sub = it.take(ii)
                 f = bsdf.eval(sub, w, RADIANCE)
                 g = np.where((cos_e > 0) | q2[kk], np.abs(cos_e) * qw[kk] / (dist * dist), 0.0)
-                contrib = f * np.take(ql, kk, axis=1) * g
+                contrib = f * take(ql, kk) * g
                 lost = np.flatnonzero(blocked & (luminance3(contrib) > 0))
                 if len(lost):
-                    face = accel.intersect(np.take(o, lost, axis=1), np.take(d, lost, axis=1)).face
+                    face = accel.intersect(take(o, lost), take(d, lost)).face
                     spec = face >= 0
                     spec[spec] = self._delta_face[face[spec]]
                     if spec.any():
                         lost, face = lost[spec], face[spec]
-                        np.add.at(through, ii[lost], luminance3(np.take(contrib, lost, axis=1)))
+                        np.add.at(through, ii[lost], luminance3(take(contrib, lost)))
                         objs = self.world.scene.objects
                         blockers = {objs[b].name for b in np.unique(accel.face_slot[face]).tolist()}
                         for s_ in np.unique(it.slot[ii[lost]]).tolist():
@@ -208,12 +208,12 @@ class ChiefRays(PathMethod):
             if rel is not None:
                 lcd = np.where(np.isnan(lcd), rel, lcd)
             sig = self._code(state.extra["sig"][keep], [f"{nm}:{label}" for nm in names], which[keep])
-            w_k = np.take(wo, keep, axis=1)
-            o = ctx.world.accel.spawn(np.take(it.p, keep, axis=1), np.take(it.ng, keep, axis=1), w_k, it.offset[keep])
+            w_k = take(wo, keep)
+            o = ctx.world.accel.spawn(take(it.p, keep), take(it.ng, keep), w_k, it.offset[keep])
             extra = {"sig": sig, "lcd": lcd[keep]}
             if polar is not None:
-                extra |= {"stokes": np.take(stokes, keep, axis=-1), "frame": np.take(frame, keep, axis=1)}
-            out.append(PathState(o, w_k, np.take(beta, keep, axis=1), state.owner[keep], state.rep[keep],
+                extra |= {"stokes": take(stokes, keep), "frame": take(frame, keep)}
+            out.append(PathState(o, w_k, take(beta, keep), state.owner[keep], state.rep[keep],
                                  np.zeros(len(keep)), np.ones(len(keep), bool), extra))
         return out
 

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from .scene import EyeSpec
-from .vec import F32, dot, normalize
+from .vec import F32, dot, normalize, take
 
 
 def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
@@ -156,7 +156,7 @@ class ThinLensEye:
         cand = np.flatnonzero((dz < 0) & (oz > 0))
         if len(cand) == 0:
             return t, lens
-        o, d = np.take(origins, cand, axis=1), np.take(dirs, cand, axis=1)
+        o, d = take(origins, cand), take(dirs, cand)
         tc = -oz[cand] / dz[cand]
         rel = o - self._pos + tc * d
         lx, ly = dot(rel, self._right), dot(rel, self._up)

@@ -33,7 +33,7 @@ from .sampling import Distribution1D, TriangleSet
 from .schema import Field, Schema
 from .units import MM2_TO_M2, lambertian_luminance_cd_m2, luminance, normalize_color
 from .validate import MAX_FLUX, MAX_LUMINANCE
-from .vec import F32, dot, norm
+from .vec import F32, dot, norm, take
 
 #: Importance-driven cluster choice is used up to this many emitting objects (beyond it, power alone).
 MAX_CLUSTERS = 32
@@ -184,7 +184,7 @@ class LightTable:
         (3, n) on the emitting side, area density (n,) mm^-2 of point and side together)."""
         tri, pmf = self.dist.sample(u[0])
         points = self.tris.point(tri, u[1:3])
-        normal = np.take(self.normal32, tri, axis=1)
+        normal = take(self.normal32, tri)
         pdf = pmf / self.tris.area[tri]
         two = self.two_sided[tri]
         if np.any(two):
@@ -196,9 +196,9 @@ class LightTable:
     def emitted(self, tri: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(3, n) luminance leaving light triangles ``tri`` toward rays that arrive along ``d`` (3, n):
         the radiance on the emitting side, 0 behind a one-sided emitter."""
-        front = dot(d, np.take(self.normal32, tri, axis=1)) < 0
+        front = dot(d, take(self.normal32, tri)) < 0
         visible = front | self.two_sided[tri]
-        return np.take(self.radiance32, tri, axis=1) * visible
+        return take(self.radiance32, tri) * visible
 
     def pdf_power_area(self, tri: np.ndarray) -> np.ndarray:
         """Area density (mm^-2) of the power-proportional choice of a point on light triangles ``tri``."""
@@ -262,10 +262,10 @@ class LightTable:
         v = y - p
         dist = norm(v)
         w = (v * (1.0 / np.maximum(dist, 1e-300))).astype(F32)
-        n_y = np.take(self.normal32, tri, axis=1)
+        n_y = take(self.normal32, tri)
         cos_y = -dot(w, n_y)
         lit = (cos_y > 0) | self.two_sided[tri]
-        return w, dist, np.take(self.radiance32, tri, axis=1) * lit, np.abs(cos_y)
+        return w, dist, take(self.radiance32, tri) * lit, np.abs(cos_y)
 
     # -- the brightness-theorem analysis --------------------------------------------------------
     def quadrature(self, level: int | np.ndarray = 4):
@@ -286,9 +286,9 @@ class LightTable:
                         cells.append(((i + 2 / 3) / lv, (j + 2 / 3) / lv))
             b = np.array(cells).T  # (2, c)
             c = b.shape[1]
-            v0, e1, e2 = (np.take(a, idx, axis=1)[:, :, None] for a in (t.v0, t.e1, t.e2))
+            v0, e1, e2 = (take(a, idx)[:, :, None] for a in (t.v0, t.e1, t.e2))
             pts = (v0 + b[0] * e1 + b[1] * e2).reshape(3, -1)
-            parts.append((pts, *(np.repeat(np.take(a, idx, axis=-1), c, axis=-1)
+            parts.append((pts, *(np.repeat(take(a, idx), c, axis=-1)
                                  for a in (t.normal, t.area / c, self.radiance, self.two_sided))))
         if not parts:
             return np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0), np.zeros((3, 0)), np.zeros(0, bool)

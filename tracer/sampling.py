@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .vec import cross, dot, norm
+from .vec import cross, dot, norm, take
 
 #: |cos| between a sampled direction and an aperture's normal below which the direction is
 #: treated as grazing the aperture plane: its solid-angle density would be unbounded, so both
@@ -375,8 +375,8 @@ class TriangleSet:
     def point(self, tri: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Uniform points (3, n) on triangles ``tri`` (n,) from u (2, n) (:func:`uniform_triangle`)."""
         b = uniform_triangle(u)
-        return (np.take(self.v0, tri, axis=1) + b[0] * np.take(self.e1, tri, axis=1)
-                + b[1] * np.take(self.e2, tri, axis=1))
+        return (take(self.v0, tri) + b[0] * take(self.e1, tri)
+                + b[1] * take(self.e2, tri))
 
 
 def sample_triangles(tris: np.ndarray, u: np.ndarray, areas: np.ndarray | None = None):

@@ -24,6 +24,7 @@ from .optics.materials import make_materials
 from .optics.polar import Transport
 from .scene import EyeSpec, Scene
 from .units import luminance3
+from .vec import take
 
 
 class World:
@@ -148,12 +149,12 @@ class World:
         (all of one ``material``, when given: its objects say whether normals or UVs need interpolating)."""
         a = self.accel
         if ng is None:
-            ng = np.take(a.normal32, face, axis=1)
+            ng = take(a.normal32, face)
         if material is not None and not any(o.normals is not None or o.uv is not None for o in material.objects):
             ns, uv = ng, None
         else:
             ns, uv = a.shading(face, p, ng)
-        return Interaction(d, p, ng, ns, uv, a.face_slot[face], np.take(a.offset, face))
+        return Interaction(d, p, ng, ns, uv, a.face_slot[face], take(a.offset, face))
 
     @property
     def max_luminance(self) -> float:

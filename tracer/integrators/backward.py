@@ -37,7 +37,7 @@ from ..optics.bsdf import RADIANCE, REFLECTION, TRANSMISSION
 from ..sampling import uniform_disk_concentric
 from ..schema import Field
 from ..units import luminance3
-from ..vec import F32, dot
+from ..vec import F32, dot, put, take
 from .base import MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
 
@@ -245,7 +245,7 @@ class BackwardTracer(Integrator, PathMethod):
     def _add(self, ctx, component: str, owner, rep, sample, value):
         lit = np.flatnonzero(luminance3(value) > 0)
         if len(lit):
-            ctx.splats.add(component, owner[lit], rep[lit], np.take(value, lit, axis=1))
+            ctx.splats.add(component, owner[lit], rep[lit], take(value, lit))
             ctx.sample_found[sample[lit]] = True
 
     @staticmethod
@@ -273,7 +273,7 @@ class BackwardTracer(Integrator, PathMethod):
             beta = self.world.polar.emitted(beta, state.extra, state.d, self.lights.slot[tri])
         value = beta * self.lights.emitted(tri, state.d)
         if self.nee_lights:
-            cos_y = np.abs(dot(state.d, np.take(self.lights.tris.normal, tri, axis=1)))
+            cos_y = np.abs(dot(state.d, take(self.lights.tris.normal, tri)))
             p_light = solid_angle_pdf(self.lights.pdf_power_area(tri), t, cos_y)
             value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, p_light))
         self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
@@ -299,9 +299,9 @@ class BackwardTracer(Integrator, PathMethod):
             value = state.beta * f * radiance * (g * mis)
             ok = np.flatnonzero(luminance3(value) > 0)
             if len(ok):
-                o, d, tmax = segment_to(accel, np.take(it.p, ok, axis=1), np.take(it.ng, ok, axis=1),
-                                        np.take(y, ok, axis=1), it.offset[ok])
-                parts.append(Shadow(o, d, tmax, np.take(value, ok, axis=1), data(ok)))
+                o, d, tmax = segment_to(accel, take(it.p, ok), take(it.ng, ok),
+                                        take(y, ok), it.offset[ok])
+                parts.append(Shadow(o, d, tmax, take(value, ok), data(ok)))
         if self.nee_env:
             w, radiance, p_env = self.env.sample(rng.random((2, m)))
             w = w.astype(F32)
@@ -310,16 +310,16 @@ class BackwardTracer(Integrator, PathMethod):
             value = state.beta * f * radiance * (mis / np.maximum(p_env, 1e-300))
             ok = np.flatnonzero(luminance3(value) > 0)
             if len(ok):
-                w_ok = np.take(w, ok, axis=1)
-                o = accel.spawn(np.take(it.p, ok, axis=1), np.take(it.ng, ok, axis=1), w_ok, it.offset[ok])
-                parts.append(Shadow(o, w_ok, np.full(len(ok), np.inf), np.take(value, ok, axis=1), data(ok)))
+                w_ok = take(w, ok)
+                o = accel.spawn(take(it.p, ok), take(it.ng, ok), w_ok, it.offset[ok])
+                parts.append(Shadow(o, w_ok, np.full(len(ok), np.inf), take(value, ok), data(ok)))
         return Shadow.concat(parts) if parts else None
 
     def deliver(self, shadow, visible, ctx):
         k = np.flatnonzero(visible)
         if len(k):
             d = shadow.data
-            self._add(ctx, "connection", d["owner"][k], d["rep"][k], d["sample"][k], np.take(shadow.value, k, axis=1))
+            self._add(ctx, "connection", d["owner"][k], d["rep"][k], d["sample"][k], take(shadow.value, k))
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
         """One sample per path; at a surface with two delta branches (glass, a coating), a path that has
@@ -337,27 +337,28 @@ class BackwardTracer(Integrator, PathMethod):
         j = np.flatnonzero(both)
         if len(j) == 0:
             return out
-        p, ng, off = np.take(it.p, j, axis=1), np.take(it.ng, j, axis=1), it.offset[j]
-        beta0 = np.take(state.beta, j, axis=1)
+        p, ng, off = take(it.p, j), take(it.ng, j), it.offset[j]
+        beta0 = take(state.beta, j)
         rows = sl.start + j  # the first branch replaces the sampled continuation
         nxt.extra["splits"][rows] += 1
         more = nxt.reserve(len(j))  # the second goes after the bounce's hits
         nxt.owner[more], nxt.rep[more] = nxt.owner[rows], nxt.rep[rows]
         for v in nxt.extra.values():
-            v[..., more] = v[..., rows]
+            v[..., more] = take(v, rows)
         polar = self.world.polar if "stokes" in state.extra else None
         for (wo, weight, flags, _label), at in zip(lobes, (rows, more), strict=True):
-            w = np.take(wo, j, axis=1)
+            w = take(wo, j)
             if polar is not None:  # on every hit (most split), then the split ones taken
                 beta, stokes, frame = polar.scatter(state.beta, state.extra, it, bsdf, wo, weight,
                                                     np.full(m, flags, np.int8), False)
-                beta = np.take(beta, j, axis=1)
-                nxt.extra["stokes"][..., at] = np.take(stokes, j, axis=-1)
-                nxt.extra["frame"][:, at] = np.take(frame, j, axis=1)
+                beta = take(beta, j)
+                put(nxt.extra["stokes"], at, take(stokes, j))
+                put(nxt.extra["frame"], at, take(frame, j))
             else:
-                beta = beta0 * np.take(np.broadcast_to(weight, (3, m)), j, axis=1)
-            nxt.o[:, at] = self.world.accel.spawn(p, ng, w, off)
-            nxt.d[:, at], nxt.beta[:, at] = w, beta
+                beta = beta0 * take(np.broadcast_to(weight, (3, m)), j)
+            put(nxt.o, at, self.world.accel.spawn(p, ng, w, off))
+            put(nxt.d, at, w)
+            put(nxt.beta, at, beta)
             nxt.pdf[at], nxt.specular[at], nxt.alive[at] = 0, True, luminance3(beta) > 0
         return out
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..units import luminance3
-from ..vec import F32
+from ..vec import F32, take
 from .base import MAX_DEPTH, WAVE, Integrator, register
 from .path import PathMethod, PathState, continue_by_sampling, trace
 
@@ -54,13 +54,13 @@ class Particles:
         tri, points, normal, pdf_pos = lights.sample_emission(rng.random((4, n)))
         it = Interaction(-normal, points, normal, normal, None, lights.slot[tri])
         s = self.emission.sample(it, rng.random((self.emission.dims, n), F32), IMPORTANCE)
-        beta = (np.take(lights.radiance, tri, axis=1) * (np.pi * s.weight / pdf_pos)).astype(F32)
+        beta = (take(lights.radiance, tri) * (np.pi * s.weight / pdf_pos)).astype(F32)
         alive = np.flatnonzero((s.flags != 0) & (luminance3(beta) > 0))
-        wo = np.take(s.wo, alive, axis=1)
-        start = np.take(points, alive, axis=1)
-        o = self.world.accel.spawn(start, np.take(normal, alive, axis=1), wo)
+        wo = take(s.wo, alive)
+        start = take(points, alive)
+        o = self.world.accel.spawn(start, take(normal, alive), wo)
         pid = first + alive
-        beta = np.take(beta, alive, axis=1)
+        beta = take(beta, alive)
         polar = self.world.polar
         extra = polar.start_light(beta, wo, lights.slot[tri[alive]]) if polar is not None else {}
         state = PathState(o, wo, beta, pid, pid % replicates, s.pdf[alive], np.zeros(len(alive), bool), extra)
@@ -132,16 +132,16 @@ class ForwardTracer(Integrator, PathMethod):
             self._record(state.owner, state.o + end * state.d, at)
         k = np.flatnonzero(at)
         if len(k):
-            sx, sy = eye.retina_point(np.take(lens, k, axis=1), np.take(state.d, k, axis=1))
+            sx, sy = eye.retina_point(take(lens, k), take(state.d, k))
             pix = eye.pixel_of(sx, sy)
             ok = pix >= 0
             k, pix = k[ok], pix[ok]
             ctx.found += len(k)
-            value = np.take(state.beta, k, axis=1)
+            value = take(state.beta, k)
             polar = self.world.polar
             if polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
-                value = polar.detect(value, {key: np.take(state.extra[key], k, axis=-1) for key in polar.KEYS},
-                                     np.take(state.d, k, axis=1))
+                value = polar.detect(value, {key: take(state.extra[key], k) for key in polar.KEYS},
+                                     take(state.d, k))
             ctx.splats.add("light", pix, state.rep[k], value / eye.extent[pix])
         return at
 

@@ -31,7 +31,7 @@ import numpy as np
 from ..accel import OFFSET_SCALE
 from ..optics.bsdf import DELTA, IMPORTANCE
 from ..units import luminance3
-from ..vec import F32, max3, norm
+from ..vec import F32, max3, norm, take
 
 
 class Timers:
@@ -102,9 +102,9 @@ class PathState:
         if isinstance(idx, slice):
             return PathState(self.o[:, idx], self.d[:, idx], self.beta[:, idx], self.owner[idx], self.rep[idx],
                              self.pdf[idx], self.specular[idx], {k: v[..., idx] for k, v in self.extra.items()})
-        t2 = lambda a: np.take(a, idx, axis=1)  # noqa: E731
+        t2 = lambda a: take(a, idx)  # noqa: E731
         return PathState(t2(self.o), t2(self.d), t2(self.beta), self.owner[idx], self.rep[idx], self.pdf[idx],
-                         self.specular[idx], {k: np.take(v, idx, axis=-1) for k, v in self.extra.items()})
+                         self.specular[idx], {k: take(v, idx) for k, v in self.extra.items()})
 
     @staticmethod
     def concat(parts: list[PathState]) -> PathState:
@@ -138,9 +138,9 @@ class Shadow:
         return self.o.shape[1]
 
     def take(self, idx) -> Shadow:
-        t2 = lambda a: np.take(a, idx, axis=1)  # noqa: E731
+        t2 = lambda a: take(a, idx)  # noqa: E731
         return Shadow(t2(self.o), t2(self.d), self.tmax[idx], t2(self.value),
-                      {k: (np.take(v, idx, axis=-1)) for k, v in self.data.items()})
+                      {k: (take(v, idx)) for k, v in self.data.items()})
 
     @staticmethod
     def concat(parts: list[Shadow]) -> Shadow:
@@ -358,9 +358,9 @@ def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
             alive[idx[~keep]] = False
             beta[:, idx[keep]] *= 1.0 / np.maximum(q[idx[keep]], 1e-30)
     keep = np.flatnonzero(alive)
-    t2 = lambda a: np.take(a, keep, axis=1)  # noqa: E731
+    t2 = lambda a: take(a, keep)  # noqa: E731
     return PathState(t2(nxt.o), t2(nxt.d), t2(nxt.beta), nxt.owner[keep], nxt.rep[keep], nxt.pdf[keep],
-                     nxt.specular[keep], {k: np.take(v, keep, axis=-1) for k, v in nxt.extra.items()})
+                     nxt.specular[keep], {k: take(v, keep) for k, v in nxt.extra.items()})
 
 
 #: Paths cut at max_depth are followed this many segments further by :func:`probe_cut`.
@@ -427,13 +427,13 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
             if len(miss):
                 method.escaped(state.take(miss), ctx)
             if len(lights):  # emission, before the emitters' own materials take the paths
-                tri = np.take(lights.face_light_ext, face)
+                tri = take(lights.face_light_ext, face)
                 e = np.flatnonzero(tri >= 0)
                 if len(e):
                     se = state.take(e)
                     method.emitted(se, tri[e], se.o + t[e] * se.d, t[e], ctx)
             # Hits grouped by material; misses, paths at the sensor and absorbed paths (group -1) leave.
-            mat = np.take(world.face_group, face)
+            mat = take(world.face_group, face)
             order = np.argsort(mat, kind="stable")
             counts = np.bincount(mat.astype(np.int64) + 1, minlength=len(materials) + 1)
             order = order[counts[0]:]
@@ -443,7 +443,7 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
             f = face[order]
             th = t[order]
             p = st.o + th * st.d
-            ng = np.take(accel.normal32, f, axis=1)
+            ng = take(accel.normal32, f)
             bounds = np.cumsum(counts[1:])
             spare = sum(method.spare(bsdf, int(counts[m + 1])) for m, bsdf in enumerate(materials))
             nxt = Next.for_hits(st, spare)

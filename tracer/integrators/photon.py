@@ -48,7 +48,7 @@ from ..film import Splats
 from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
 from ..schema import Field
 from ..units import luminance3
-from ..vec import F32, dot
+from ..vec import F32, dot, take
 from .backward import BackwardTracer
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
 from .forward import Particles
@@ -120,7 +120,7 @@ class PhotonGrid:
         key = _cell_hash(cell, rep)
         order = np.argsort(key, kind="stable")
         self.keys = key[order]
-        t = lambda a: np.take(a, order, axis=-1)  # noqa: E731
+        t = lambda a: take(a, order)  # noqa: E731
         self.p, self.d, self.beta, self.slot, self.ng, self.rep, self.cell = (
             t(p), t(d), t(beta), t(slot), t(ng), t(rep), t(cell))
 
@@ -176,7 +176,7 @@ class PhotonPass(PathMethod):
     def connect(self, state, it, bsdf, ctx):
         keep = np.flatnonzero(state.extra["scattered"] | self.store_direct)
         if len(keep):
-            t = lambda a: np.take(a, keep, axis=-1)  # noqa: E731
+            t = lambda a: take(a, keep)  # noqa: E731
             self.stored.append((t(it.p), t(it.d), t(state.beta), it.slot[keep], t(it.ng), state.rep[keep]))
         return None
 
@@ -261,7 +261,7 @@ class PhotonTracer(BackwardTracer):
             own, yy = owner[order], y[order]
             better = yy > best[own]
             own_b = own[better]
-            point[:, own_b] = np.take(it.p, order[better], axis=1)
+            point[:, own_b] = take(it.p, order[better])
             slot[own_b] = it.slot[order[better]]
             best[own_b] = yy[better]
         grid_point = point.reshape(3, len(ys), len(xs))

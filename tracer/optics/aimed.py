@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..sampling import cosine_hemisphere, frame_from_normal, to_world
-from ..vec import F32, dot
+from ..vec import F32, dot, put, take
 from .bsdf import DELTA, REFLECTION, BSDFSample, Interaction
 
 
@@ -80,7 +80,7 @@ class Aimed:
         for k, target in enumerate(self.targets):
             sel = np.flatnonzero(which == k)
             if len(sel):
-                p[sel] = target.pdf(np.take(it.p, sel, axis=1), np.take(wo, sel, axis=1) * sign[sel])
+                p[sel] = target.pdf(take(it.p, sel), take(wo, sel) * sign[sel])
         return p
 
     def sample(self, it: Interaction, u: np.ndarray, mode) -> BSDFSample:
@@ -101,23 +101,24 @@ class Aimed:
         if len(own_idx):
             sub = it if len(own_idx) == n else it.take(own_idx)
             s = self.own.sample(sub, u[1:1 + self.own.dims, own_idx], mode)
-            wo[:, own_idx] = s.wo
+            put(wo, own_idx, s.wo)
             p_own[own_idx] = s.pdf
             own_flags[own_idx] = s.flags
-            f[:, own_idx] = self.own.eval(sub, s.wo, mode)
+            put(f, own_idx, self.own.eval(sub, s.wo, mode))
         ut = u[1 + self.own.dims:]
         for k, target in enumerate(self.targets):
             sel = aim_idx[which[aim_idx] == k]
             if len(sel):
-                d_t, pt = target.sample(np.take(it.p, sel, axis=1), np.take(ut[:target.dims], sel, axis=1))
-                wo[:, sel] = d_t * sign[sel]
+                d_t, pt = target.sample(take(it.p, sel), take(ut[:target.dims], sel))
+                put(wo, sel, d_t * sign[sel])
                 p_t[sel] = pt
             back = own_idx[which[own_idx] == k]
             if len(back):  # the target strategy's density at the own samples' directions
-                p_t[back] = target.pdf(np.take(it.p, back, axis=1), np.take(wo, back, axis=1) * sign[back])
+                p_t[back] = target.pdf(take(it.p, back), take(wo, back) * sign[back])
         if len(aim_idx):  # the own law's value and density at the aimed directions
             sub = it if len(aim_idx) == n else it.take(aim_idx)
-            f[:, aim_idx], p_own[aim_idx] = self.own.eval_pdf(sub, np.take(wo, aim_idx, axis=1), mode)
+            f_aim, p_own[aim_idx] = self.own.eval_pdf(sub, take(wo, aim_idx), mode)
+            put(f, aim_idx, f_aim)
         mix = share * p_t + (1.0 - share) * p_own
         valid = np.where(aimed, p_t > 0, own_flags != 0) & (mix > 0)
         weight = np.where(valid, f / np.where(valid, mix, 1), 0)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..vec import F32, dot
+from ..vec import F32, dot, take
 from .polar import DEPOLARISE, Mueller
 
 #: Transport modes.
@@ -69,7 +69,7 @@ class Interaction:
     def take(self, idx: np.ndarray) -> Interaction:
         """The interaction of rays ``idx`` only, with what the materials cached for them."""
         n = len(self)
-        t = lambda a: None if a is None else np.take(a, idx, axis=-1)  # noqa: E731
+        t = lambda a: None if a is None else take(a, idx)  # noqa: E731
 
         def part(v):
             if isinstance(v, tuple):
@@ -148,7 +148,7 @@ class BSDF:
         there is one object, else (..., n)."""
         if values.shape[-1] == 1:
             return values
-        return np.take(values, self.local[it.slot], axis=-1)
+        return take(values, self.local[it.slot])
 
     # -- the interface ---------------------------------------------------------------------------
     def sample(self, it: Interaction, u: np.ndarray, mode: str) -> BSDFSample:

@@ -17,7 +17,7 @@ import numpy as np
 from ..sampling import cosine_hemisphere, frame_from_normal, gaussian_lobe, gaussian_lobe_pdf, to_local, to_world
 from ..schema import REQUIRED, Field, Schema
 from ..units import luminance3
-from ..vec import F32, dot, reflect
+from ..vec import F32, dot, reflect, take
 from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
 from .fresnel import fresnel_amplitudes, refract, unpolarized_from_amplitudes
 from .polar import POLARISE, SP, Mueller, amplitudes, axis_frame, s_frame, sp_from_amplitudes, sp_from_powers
@@ -406,7 +406,7 @@ class LCD(BSDF):
             uv = it.uv[:, sel]
             x = np.clip((uv[0] * w).astype(np.int64), 0, w - 1)  # uv >= 0: truncation is floor
             y = np.clip(((1 - uv[1]) * h).astype(np.int64), 0, h - 1)
-            cell = np.take(rel, y * w + x, axis=1)
+            cell = take(rel, y * w + x)
             if absolute:
                 cell = cell * t_open
             if len(self.cells) == 1:

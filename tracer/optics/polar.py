@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..sampling import frame_from_normal
-from ..vec import F32, cross, dot
+from ..vec import F32, cross, dot, take
 
 #: Kinds of :class:`Mueller`.
 SP, POLARISE, DEPOLARISE = "sp", "polarise", "depolarise"
@@ -238,7 +238,7 @@ class Transport:
         if not self.polarised_emitters:
             return {"stokes": stokes, "frame": any_frame(wo)}
         stokes[0] = self.emit_degree[slot]
-        return {"stokes": stokes, "frame": axis_frame(np.take(self.emit_axis, slot, axis=1), wo)}
+        return {"stokes": stokes, "frame": axis_frame(take(self.emit_axis, slot), wo)}
 
     def start_camera(self, beta: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, dict]:
         """(beta, extra) of camera paths of weight ``beta`` (3, n) leaving the eye along ``d``: the eye's
@@ -270,7 +270,7 @@ class Transport:
             return beta
         degree = self.emit_degree[slot]
         k = -d  # the light travels toward the eye
-        c2, s2 = rotation(extra["frame"], axis_frame(np.take(self.emit_axis, slot, axis=1), k), k)
+        c2, s2 = rotation(extra["frame"], axis_frame(take(self.emit_axis, slot), k), k)
         return beta * (1 + degree * (c2 * extra["stokes"][0] + s2 * extra["stokes"][1]))
 
     # -- interactions ----------------------------------------------------------------------------
