@@ -115,9 +115,13 @@ class Aimed:
             back = own_idx[which[own_idx] == k]
             if len(back):  # the target strategy's density at the own samples' directions
                 p_t[back] = target.pdf(take(it.p, back), take(wo, back) * sign[back])
-        if len(aim_idx):  # the own law's value and density at the aimed directions
-            sub = it if len(aim_idx) == n else it.take(aim_idx)
-            f_aim, p_own[aim_idx] = self.own.eval_pdf(sub, take(wo, aim_idx), mode)
+        if 2 * len(aim_idx) >= n:  # the own law's value and density at the aimed directions: at every
+            # ray, the aimed ones kept (when most are aimed, cheaper than taking them out and back)
+            f_all, p_all = self.own.eval_pdf(it, wo, mode)
+            f = np.where(aimed, f_all, f)
+            p_own = np.where(aimed, p_all, p_own)
+        elif len(aim_idx):
+            f_aim, p_own[aim_idx] = self.own.eval_pdf(it.take(aim_idx), take(wo, aim_idx), mode)
             put(f, aim_idx, f_aim)
         mix = share * p_t + (1.0 - share) * p_own
         valid = np.where(aimed, p_t > 0, own_flags != 0) & (mix > 0)
