@@ -327,14 +327,18 @@ class BackwardTracer(Integrator, PathMethod):
         or T (n_i/n_t)^2 for radiance), where the smaller branch carries at least :data:`SPLIT_MIN` of
         the two: this removes the variance of the Fresnel choice (a windshield at 67 deg reflects
         14 %: the symbol and its ghost), and leaves the choice where one branch is negligible."""
-        out = continue_by_sampling(state, it, self._eye_sampler[id(bsdf)], ctx, RADIANCE, nxt, sl)
+        sampler = self._eye_sampler[id(bsdf)]
         if self.splits == 0 or not (bsdf.delta and bsdf.flags & REFLECTION and bsdf.flags & TRANSMISSION):
-            return out
-        lobes = bsdf.lobes(it, RADIANCE)  # the branches the sample chose from (cached by the material)
+            return continue_by_sampling(state, it, sampler, ctx, RADIANCE, nxt, sl)
+        lobes = bsdf.lobes(it, RADIANCE)  # the branches a sample chooses from (cached by the material)
         m = len(it)
         y = [luminance3(np.broadcast_to(weight, (3, m))) for _, weight, _, _ in lobes]
         both = (np.minimum(y[0], y[1]) >= SPLIT_MIN * (y[0] + y[1])) & (state.extra["splits"] < self.splits)
         j = np.flatnonzero(both)
+        # The paths that do not split sample a branch: when most split, only those (the split ones'
+        # entries are written below; the random numbers are drawn for every hit either way).
+        out = continue_by_sampling(state, it, sampler, ctx, RADIANCE, nxt, sl,
+                                   np.flatnonzero(~both) if 2 * len(j) >= m else None)
         if len(j) == 0:
             return out
         p, ng, off = take(it.p, j), take(it.ng, j), it.offset[j]

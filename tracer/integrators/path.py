@@ -31,7 +31,7 @@ import numpy as np
 from ..accel import OFFSET_SCALE
 from ..optics.bsdf import DELTA, IMPORTANCE
 from ..units import luminance3
-from ..vec import F32, max3, norm, take
+from ..vec import F32, max3, norm, put, take
 
 
 class Timers:
@@ -323,20 +323,30 @@ class Next:
             self.extra[k][..., sl] = v
 
 
-def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice) -> list[PathState]:
+def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice,
+                         rows: np.ndarray | None = None) -> list[PathState]:
     """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path,
-    written into ``nxt[sl]``; absorbed samples end. Returns no further paths."""
-    s = sampler.sample(it, ctx.rng.random((sampler.dims, len(it)), F32) if sampler.dims else None, mode)
+    written into ``nxt[sl]``; absorbed samples end. Returns no further paths. With ``rows`` (indices
+    into the hits), only those paths sample, into their own entries of ``nxt``; the random numbers are
+    drawn for every hit all the same, so that the stream does not depend on which."""
+    u = ctx.rng.random((sampler.dims, len(it)), F32) if sampler.dims else None
+    if rows is not None:
+        if len(rows) == 0:
+            return []
+        state, it, u, sl = state.take(rows), it.take(rows), None if u is None else take(u, rows), sl.start + rows
+    s = sampler.sample(it, u, mode)
     polar = ctx.world.polar
     if polar is not None and "stokes" in state.extra:
         bsdf = getattr(sampler, "own", sampler)  # an aimed mixture scatters by its material's law
-        beta, nxt.extra["stokes"][..., sl], nxt.extra["frame"][:, sl] = polar.scatter(
-            state.beta, state.extra, it, bsdf, s.wo, s.weight, s.flags, mode == IMPORTANCE)
+        beta, stokes, frame = polar.scatter(state.beta, state.extra, it, bsdf, s.wo, s.weight, s.flags,
+                                            mode == IMPORTANCE)
+        put(nxt.extra["stokes"], sl, stokes)
+        put(nxt.extra["frame"], sl, frame)
     else:
         beta = state.beta * s.weight
-    nxt.beta[:, sl] = beta
-    nxt.d[:, sl] = s.wo
-    nxt.o[:, sl] = ctx.world.accel.spawn(it.p, it.ng, s.wo, it.offset)
+    put(nxt.beta, sl, beta)
+    put(nxt.d, sl, s.wo)
+    put(nxt.o, sl, ctx.world.accel.spawn(it.p, it.ng, s.wo, it.offset))
     nxt.pdf[sl] = s.pdf
     nxt.specular[sl] = (s.flags & DELTA) != 0
     nxt.alive[sl] = (s.flags != 0) & (luminance3(beta) > 0)
