@@ -3,6 +3,7 @@ the same run on the same geometry (the hud-direct preset unless another scene is
 process and on several, with the time of every stage of the path loop.
 
     .venv/bin/python benchmarks/throughput.py [PRESET_OR_SCENE] [--seconds S] [--workers W] [--repeats R]
+                                              [--polarisation off]
 
 Raw rates, one core: (1) one Embree closest-hit call on 2^20 rays with random origins in the scene's
 bounding box and random directions, best of 5 (the ceiling the speed goal is stated against); (2) the
@@ -14,13 +15,17 @@ clock starts once every worker has built its world, as in a render, and the star
 alternating R times (medians: the machine's speed drifts between runs). "Steady" rates leave out the
 first batch. Per stage: the share of one process's wall time spent in each stage of the path loop
 (intersect, sensor, shade, shadow, film, other). Peak memory is the largest resident set of this
-process and of its workers.
+process and of its workers. ``--polarisation off`` renders the scene with ``"polarisation": "off"``
+(the unpolarised model, on which the transport core's speed goal was set; hud-direct's default
+carries Stokes vectors through its windshield).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import resource
+import shutil
 import sys
 import tempfile
 import time
@@ -120,6 +125,8 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
+    ap.add_argument("--polarisation", choices=("auto", "off"), default=None,
+                    help="write the scene with this top-level polarisation (default: the scene's own)")
     ap.add_argument("--batch-size", default=str(DEFAULT_BATCH),
                     help=f"paths per batch (default {DEFAULT_BATCH}, as with --rays), or 'auto' (sized to the time "
                          "budget, as with --seconds)")
@@ -128,8 +135,16 @@ def main():
     BATCH = None if args.batch_size == "auto" else int(args.batch_size)
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
+        if args.polarisation is not None:
+            copy = Path(tmp) / "polarisation"
+            shutil.copytree(folder, copy)
+            sj = copy / "scene.json"
+            sj.write_text(json.dumps(json.loads(sj.read_text()) | {"polarisation": args.polarisation}))
+            folder = copy
         scene = load_scene(folder)
         world = World(scene)
+        print(f"scene {args.scene}: polarisation {scene.polarisation!r}, "
+              f"{'polarised' if world.polar is not None else 'unpolarised'} transport")
         raw = raw_embree_rate(scene)
         print(f"raw embreex intersection rate: {raw:,.0f} rays/s (one call on 2^20 random rays, best of 5)")
         for label in args.variants:
