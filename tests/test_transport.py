@@ -288,3 +288,65 @@ def test_specular_splits_move_noise_not_answer(tmp_path):
         m, se[splits] = region_mean(y, res.film.variance_y(), np.ones(y.shape, bool))
         assert abs(m - expected) < z_bound(2) * se[splits], (splits, m, expected, se[splits])
     assert se[3] < 0.3 * se[0]
+
+
+def _tilted_plate(folder):
+    """A glass plate seen over 40 deg of incidence angles (about 40 to 80 deg): most of the eye's rays
+    split at its front face, those nearer normal incidence (smaller branch under SPLIT_MIN) sample a
+    branch, in the same bounce; a panel above it is seen in reflection."""
+    sb = SceneBuilder(folder, "tilted plate", "a glass plate met at 40-80 deg reflecting a panel")
+    theta = math.radians(60.0)
+    normal = np.array([0.0, -math.cos(theta), math.sin(theta)])
+    sb.add("plate", box(900.0, 900.0, 5.0), {"type": "dielectric", "ior": 1.52},
+           frame_matrix([0.0, 200.0, 0.0], [1, 0, 0], normal))
+    reflected = np.array([0.0, 1.0, 0.0]) - 2 * normal[1] * normal
+    sb.add("panel", rectangle(300.0, 300.0)[:2], {"type": "absorber"},
+           frame_matrix(np.array([0.0, 200.0, 0.0]) + 250.0 * reflected, [1, 0, 0], -reflected),
+           emission={"luminance": 1000.0})
+    return sb.write(eye={"position": [0.0, 0.0, 0.0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                         "accommodation_distance_mm": 350.0, "resolution": [8, 8], "fov_deg": [40.0, 40.0]})
+
+
+@pytest.mark.parametrize("method, module, constant", [
+    ("backward", "tracer.integrators.backward", "SAMPLE_UNSPLIT_ONLY"),
+    ("forward", "tracer.optics.aimed", "EVAL_EVERY_RAY")])
+def test_speed_shortcuts_leave_the_image_as_it_was(tmp_path, monkeypatch, method, module, constant):
+    """The shortcuts of the path loop compute the same numbers by another route: sampling only the
+    glass hits that do not split (backward, on a plate where a bounce has both), evaluating an aimed
+    mixture's own law at every ray (forward, hud-direct's LEDs and scatterer). With each one off, a
+    fixed-seed render gives the same image to rounding (numpy's vectorised exp may differ in the last
+    bit at an array's tail), drawn from the same random stream."""
+    import importlib
+
+    folder = _tilted_plate(tmp_path / "p") if method == "backward" else PRESETS["hud-direct"].write(tmp_path / "s")
+    world = World(load_scene(folder))
+    images = []
+    for share in (getattr(importlib.import_module(module), constant), 2.0):  # 2: never taken
+        monkeypatch.setattr(importlib.import_module(module), constant, share)
+        res = INTEGRATORS[method](world, 5).render(Budget(rays=300_000))
+        images.append((res.rays, res.film.rgb()))
+    (rays0, a), (rays1, b) = images
+    assert rays0 == rays1
+    assert np.abs(a).max() > 0
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9 * np.abs(a).max())
+
+
+def test_take_and_put_match_numpy_indexing():
+    """tracer.vec.take and put give what fancy indexing along the last axis gives, for the tracer's
+    indices (in range, -1 for the appended miss column), on planes of 1 to 3 dimensions."""
+    from tracer.vec import put, take
+
+    rng = np.random.default_rng(3)
+    for shape in ((7,), (3, 7), (3, 2, 7)):
+        a = rng.random(shape)
+        idx = np.array([6, 0, -1, 3, 3, 5])
+        np.testing.assert_array_equal(take(a, idx), a[..., idx])
+        for where in (np.array([5, 1, 2]), slice(2, 5)):
+            v = rng.random(a[..., where].shape)
+            ours, theirs = a.copy(), a.copy()
+            put(ours, where, v)
+            theirs[..., where] = v
+            np.testing.assert_array_equal(ours, theirs)
+        ours = a.copy()
+        put(ours, np.array([0, 4]), 2.5)  # a scalar broadcasts
+        assert np.all(ours[..., [0, 4]] == 2.5)

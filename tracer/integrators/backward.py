@@ -88,6 +88,11 @@ def solid_angle_pdf(pdf_area: np.ndarray, dist: np.ndarray, cos: np.ndarray) -> 
     out = np.full(np.broadcast(num, cos).shape, np.inf)
     return np.divide(num, cos, out=out, where=cos > 0)
 
+#: When at least this share of a bounce's hits on glass split, only the others sample a branch;
+#: below it every hit samples and the split ones' entries are overwritten (fewer takes). The image is
+#: the same either way (tests/test_transport.py).
+SAMPLE_UNSPLIT_ONLY = 0.5
+
 
 @register
 class BackwardTracer(Integrator, PathMethod):
@@ -338,7 +343,7 @@ class BackwardTracer(Integrator, PathMethod):
         # The paths that do not split sample a branch: when most split, only those (the split ones'
         # entries are written below; the random numbers are drawn for every hit either way).
         out = continue_by_sampling(state, it, sampler, ctx, RADIANCE, nxt, sl,
-                                   np.flatnonzero(~both) if 2 * len(j) >= m else None)
+                                   np.flatnonzero(~both) if len(j) >= SAMPLE_UNSPLIT_ONLY * m else None)
         if len(j) == 0:
             return out
         p, ng, off = take(it.p, j), take(it.ng, j), it.offset[j]

@@ -21,6 +21,10 @@ from ..sampling import cosine_hemisphere, frame_from_normal, to_world
 from ..vec import F32, dot, put, take
 from .bsdf import DELTA, REFLECTION, BSDFSample, Interaction
 
+#: When at least this share of the rays is aimed, :meth:`Aimed.sample` evaluates the own law at every
+#: ray and keeps the aimed ones, instead of taking those out (the same values either way).
+EVAL_EVERY_RAY = 0.5
+
 
 class CosineEmission:
     """Lambertian emission as a sampler: directions about ``it.ng`` (the emitting side's normal) with
@@ -115,8 +119,8 @@ class Aimed:
             back = own_idx[which[own_idx] == k]
             if len(back):  # the target strategy's density at the own samples' directions
                 p_t[back] = target.pdf(take(it.p, back), take(wo, back) * sign[back])
-        if 2 * len(aim_idx) >= n:  # the own law's value and density at the aimed directions: at every
-            # ray, the aimed ones kept (when most are aimed, cheaper than taking them out and back)
+        if len(aim_idx) >= EVAL_EVERY_RAY * n:  # the own law's value and density at the aimed directions:
+            # at every ray, the aimed ones kept (when most are aimed, cheaper than taking them out and back)
             f_all, p_all = self.own.eval_pdf(it, wo, mode)
             f = np.where(aimed, f_all, f)
             p_own = np.where(aimed, p_all, p_own)
