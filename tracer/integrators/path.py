@@ -402,6 +402,12 @@ def probe_cut(method: PathMethod, state: PathState, ctx: Context):
     ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
 
 
+def _hooked(method: PathMethod, hook: str) -> bool:
+    """Whether ``method`` has its own ``hook``: the loop prepares no paths for one left at
+    :class:`PathMethod`'s default, which does nothing (forward tracing ignores paths that escape)."""
+    return getattr(type(method), hook) is not getattr(PathMethod, hook)
+
+
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, probe: bool = True) -> int:
     """Run paths through the loop until they end or reach ``max_depth`` segments; returns the number
     of paths still alive at the limit (cut: a bias). With ``probe`` and a ``ctx.probe_rng``, the cut
@@ -410,6 +416,8 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
     accel = world.accel
     materials = world.materials
     lights = world.lights
+    emits = len(lights) > 0 and _hooked(method, "emitted")
+    escapes = _hooked(method, "escaped")
     for _ in range(max_depth):
         n = len(state)
         if n == 0:
@@ -419,7 +427,7 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
             with timers("sensor"):
                 ended = method.sensor(state, np.full(n, np.inf), ctx)
             rest = np.flatnonzero(~ended) if ended is not None else np.arange(n)
-            if len(rest):
+            if len(rest) and escapes:
                 with timers("shade"):
                     method.escaped(state.take(rest), ctx)
             return 0
@@ -429,14 +437,13 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
         with timers("sensor"):
             ended = method.sensor(state, t, ctx)
         with timers("shade"):
+            if escapes:
+                miss = np.flatnonzero((face < 0) & ~ended if ended is not None else face < 0)
+                if len(miss):
+                    method.escaped(state.take(miss), ctx)
             if ended is not None:
-                miss = np.flatnonzero((face < 0) & ~ended)
                 face = np.where(ended, -1, face)  # paths at the sensor end here, like misses
-            else:
-                miss = np.flatnonzero(face < 0)
-            if len(miss):
-                method.escaped(state.take(miss), ctx)
-            if len(lights):  # emission, before the emitters' own materials take the paths
+            if emits:  # emission, before the emitters' own materials take the paths
                 tri = take(lights.face_light_ext, face)
                 e = np.flatnonzero(tri >= 0)
                 if len(e):
