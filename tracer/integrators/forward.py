@@ -137,12 +137,12 @@ class ForwardTracer(Integrator, PathMethod):
             ok = pix >= 0
             k, pix = k[ok], pix[ok]
             ctx.found += len(k)
-            value = take(state.beta, k)
+            arrived = state.take(k)
+            value = arrived.beta
             polar = self.world.polar
             if polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
-                value = polar.detect(value, {key: take(state.extra[key], k) for key in polar.KEYS},
-                                     take(state.d, k))
-            ctx.splats.add("light", pix, state.rep[k], value / eye.extent[pix])
+                value = polar.detect(value, arrived.extra, arrived.d)
+            ctx.splats.add("light", pix, arrived.rep, value / eye.extent[pix])
         return at
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -107,15 +107,6 @@ class PathState:
                          self.specular[idx], {k: take(v, idx) for k, v in self.extra.items()})
 
     @staticmethod
-    def concat(parts: list[PathState]) -> PathState:
-        if len(parts) == 1:
-            return parts[0]
-        c2 = lambda name: np.concatenate([getattr(p, name) for p in parts], axis=1)  # noqa: E731
-        c1 = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-        extra = {k: np.concatenate([p.extra[k] for p in parts], axis=-1) for k in parts[0].extra}
-        return PathState(c2("o"), c2("d"), c2("beta"), c1("owner"), c1("rep"), c1("pdf"), c1("specular"), extra)
-
-    @staticmethod
     def empty(extra_keys=()) -> PathState:
         z = np.zeros(0, np.int64)
         return PathState(np.zeros((3, 0)), np.zeros((3, 0), F32), np.zeros((3, 0), F32), z, z, np.zeros(0, F32),
@@ -193,19 +184,6 @@ class Roulette:
         if self.threshold <= 0:
             return np.ones(len(potential))
         return np.minimum(potential / self.threshold, 1.0)
-
-    def apply(self, state: PathState, potential: np.ndarray, rng: np.random.Generator) -> PathState:
-        """Roulette ``state``: paths below the threshold survive with their probability, reweighted."""
-        q = self.survival(potential)
-        low = np.flatnonzero(q < 1.0)
-        if len(low) == 0:
-            return state
-        keep = np.ones(len(state), bool)
-        keep[low] = rng.random(len(low)) < q[low]
-        scale = np.ones(len(state))
-        scale[low] = 1.0 / np.maximum(q[low], 1e-300)
-        state = replace(state, beta=state.beta * scale)
-        return state.take(np.flatnonzero(keep))
 
     def keep(self, potential: np.ndarray) -> np.ndarray:
         """The deterministic form (the analysis): paths at or above the threshold."""
@@ -323,6 +301,41 @@ class Next:
             self.extra[k][..., sl] = v
 
 
+
+#: The arrays of a :class:`CompactedState` that stay in the bounce's :class:`Next` until needed.
+_DEFERRED = ("beta", "owner", "rep", "pdf", "specular", "extra")
+
+
+class CompactedState(PathState):
+    """The paths that go on after a bounce (:func:`_compact`): their origins and directions gathered at
+    once (the next Embree call needs them), everything else left in the bounce's :class:`Next` until
+    the paths are next taken (the sort by material), so that each of those arrays is gathered once per
+    bounce instead of twice. Reading one of them gathers them all (a hook that needs the whole state)."""
+
+    def __init__(self, o: np.ndarray, d: np.ndarray, source: Next, index: np.ndarray):
+        self.o, self.d = o, d
+        self._source, self._index = source, index
+
+    def __len__(self) -> int:
+        return len(self._index)
+
+    def __getattr__(self, name):  # only for attributes not yet set: the deferred ones
+        if name not in _DEFERRED:
+            raise AttributeError(name)
+        src, j = self.__dict__["_source"], self.__dict__["_index"]
+        self.beta, self.owner, self.rep = take(src.beta, j), take(src.owner, j), take(src.rep, j)
+        self.pdf, self.specular = take(src.pdf, j), take(src.specular, j)
+        self.extra = {k: take(v, j) for k, v in src.extra.items()}
+        return self.__dict__[name]
+
+    def take(self, idx) -> PathState:
+        if "beta" in self.__dict__:
+            return PathState.take(self, idx)
+        src, j = self._source, self._index[idx]
+        o, d = (self.o[:, idx], self.d[:, idx]) if isinstance(idx, slice) else (take(self.o, idx), take(self.d, idx))
+        return PathState(o, d, take(src.beta, j), take(src.owner, j), take(src.rep, j), take(src.pdf, j),
+                         take(src.specular, j), {k: take(v, j) for k, v in src.extra.items()})
+
 def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice,
                          rows: np.ndarray | None = None) -> list[PathState]:
     """The default continuation: one sample of ``sampler`` (a material or an aimed mixture) per path,
@@ -355,7 +368,7 @@ def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl
 
 def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
     """The paths that go on after a bounce: roulette on the living ones of ``nxt``, then one compaction
-    into the next state."""
+    into the next state (:class:`CompactedState`)."""
     n = nxt.used
     alive = nxt.alive[:n]
     beta = nxt.beta[:, :n]
@@ -368,9 +381,7 @@ def _compact(method: PathMethod, nxt: Next, ctx) -> PathState:
             alive[idx[~keep]] = False
             beta[:, idx[keep]] *= 1.0 / np.maximum(q[idx[keep]], 1e-30)
     keep = np.flatnonzero(alive)
-    t2 = lambda a: take(a, keep)  # noqa: E731
-    return PathState(t2(nxt.o), t2(nxt.d), t2(nxt.beta), nxt.owner[keep], nxt.rep[keep], nxt.pdf[keep],
-                     nxt.specular[keep], {k: take(v, keep) for k, v in nxt.extra.items()})
+    return CompactedState(take(nxt.o, keep), take(nxt.d, keep), nxt, keep)
 
 
 #: Paths cut at max_depth are followed this many segments further by :func:`probe_cut`.

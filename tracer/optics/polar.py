@@ -200,8 +200,6 @@ class Transport:
     f = 1 + b s1 and the state by 1 / f.
     """
 
-    KEYS = ("stokes", "frame")
-
     def __init__(self, world):
         """``world``: the render world (its materials, scene objects and eye, tracer.eye.ThinLensEye)."""
         self.world = world
