@@ -54,8 +54,9 @@ $(STAMP42): requirements-bpy42.lock pyproject.toml
 test-bpy-oldest: $(STAMP42)
 	$(VENV42)/bin/python -m pytest -q tests/test_blender_addon.py
 
-# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 50 minutes on 2 cores: references,
-# 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs, the eyebox scan
+# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 55 minutes on 2 cores: references,
+# 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs (the
+# unpolarised model and hud-direct's default, 6 minutes each), the eyebox scan
 # and the two hud-screen renders of docs/hud-screen-variants.png; then polarisation: Mitsuba's polarised variant
 # on a windshield and a panel, 3 minutes, and the cost of polarised transport, 3 minutes).
 # Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15
@@ -70,6 +71,7 @@ bench: $(STAMP)
 		{ apt-get install -y -qq libllvm19 || { apt-get update -qq && apt-get install -y -qq libllvm19; }; }; } || \
 		echo "bench: libllvm19 could not be installed (needs root and apt-get): Mitsuba runs its scalar variant"
 	DRJIT_LIBLLVM_PATH="$$($(LLVM19))" $(PY) benchmarks/mitsuba_peer.py
+	$(PY) benchmarks/throughput.py --seconds 10 --repeats 3 --polarisation off
 	$(PY) benchmarks/throughput.py --seconds 10 --repeats 3
 	$(PY) benchmarks/eyebox.py --half 90 30 --step 10
 	$(PY) benchmarks/screen_variants.py --seconds 120
