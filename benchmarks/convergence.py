@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import sys
 import time
@@ -35,7 +34,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.throughput import VARIANTS, make  # noqa: E402
+from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
@@ -80,13 +79,9 @@ def scene_folder(name: str) -> Path:
     whose Fresnel is the unpolarised average) on one model of light; benchmarks/mitsuba_polarised.py
     compares the polarised model with Mitsuba's polarised variant."""
     folder = CACHE / "scenes" / name
-    scene_json = folder / "scene.json"
     if not folder.exists():
         PRESETS[name].write(folder)
-    data = json.loads(scene_json.read_text())
-    if data.get("polarisation") != "off":
-        scene_json.write_text(json.dumps(data | {"polarisation": "off"}, indent=1))
-    return folder
+    return set_polarisation(folder, "off")
 
 
 def reference_seconds(name: str, ref_seconds: float) -> float:

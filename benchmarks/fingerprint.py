@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.throughput import VARIANTS, make  # noqa: E402
+from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import Budget  # noqa: E402
@@ -39,8 +39,7 @@ def fingerprints(rays: int, seed: int, polarisation: str | None = None) -> dict:
         for name in SINGLE_METHOD:
             folder = PRESETS[name].write(Path(tmp) / name)
             if polarisation is not None:
-                p = folder / "scene.json"
-                p.write_text(json.dumps(json.loads(p.read_text()) | {"polarisation": polarisation}))
+                set_polarisation(folder, polarisation)
             world = World(load_scene(folder))
             for variant in VARIANTS:
                 res = make(world, variant, seed).render(Budget(rays=rays))

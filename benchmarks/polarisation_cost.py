@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.throughput import set_polarisation  # noqa: E402
 from presets import PRESETS  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
@@ -54,11 +54,7 @@ def main():
                 continue
             folder = PRESETS[name].write(Path(tmp) / name)
             on = World(load_scene(folder))
-            p = folder / "scene.json"
-            data = json.loads(p.read_text())
-            data["polarisation"] = "off"
-            p.write_text(json.dumps(data))
-            off = World(load_scene(folder))
+            off = World(load_scene(set_polarisation(folder, "off")))
             for method in methods:
                 pol, unpol = [], []
                 for r in range(args.repeats):

@@ -61,6 +61,16 @@ def make(world: World, label: str, seed: int):
     return INTEGRATORS[method](world, seed, batch_size=BATCH, options=opts)
 
 
+def set_polarisation(folder: Path, mode: str) -> Path:
+    """Rewrite ``folder``'s scene.json with the top-level ``"polarisation": mode`` (unless it already
+    says so); returns the folder."""
+    scene_json = folder / "scene.json"
+    data = json.loads(scene_json.read_text())
+    if data.get("polarisation") != mode:
+        scene_json.write_text(json.dumps(data | {"polarisation": mode}, indent=1))
+    return folder
+
+
 def tracing_rate(res) -> float:
     """Rays per second from the first batch issued to the end: a render's wall time less its set-up
     (the pilot and the workers' start-up, which a time budget includes; reported separately)."""
@@ -135,12 +145,8 @@ def main():
     BATCH = None if args.batch_size == "auto" else int(args.batch_size)
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS[args.scene].write(Path(tmp) / "s") if args.scene in PRESETS else Path(args.scene)
-        if args.polarisation is not None:
-            copy = Path(tmp) / "polarisation"
-            shutil.copytree(folder, copy)
-            sj = copy / "scene.json"
-            sj.write_text(json.dumps(json.loads(sj.read_text()) | {"polarisation": args.polarisation}))
-            folder = copy
+        if args.polarisation is not None:  # on a copy: the folder may be the user's
+            folder = set_polarisation(Path(shutil.copytree(folder, Path(tmp) / "polarisation")), args.polarisation)
         scene = load_scene(folder)
         world = World(scene)
         print(f"scene {args.scene}: polarisation {scene.polarisation!r}, "

@@ -88,6 +88,7 @@ def solid_angle_pdf(pdf_area: np.ndarray, dist: np.ndarray, cos: np.ndarray) -> 
     out = np.full(np.broadcast(num, cos).shape, np.inf)
     return np.divide(num, cos, out=out, where=cos > 0)
 
+
 #: When at least this share of a bounce's hits on glass split, only the others sample a branch;
 #: below it every hit samples and the split ones' entries are overwritten (fewer takes). The image is
 #: the same either way (tests/test_transport.py).

@@ -131,7 +131,7 @@ class Shadow:
     def take(self, idx) -> Shadow:
         t2 = lambda a: take(a, idx)  # noqa: E731
         return Shadow(t2(self.o), t2(self.d), self.tmax[idx], t2(self.value),
-                      {k: (take(v, idx)) for k, v in self.data.items()})
+                      {k: take(v, idx) for k, v in self.data.items()})
 
     @staticmethod
     def concat(parts: list[Shadow]) -> Shadow:
@@ -301,7 +301,6 @@ class Next:
             self.extra[k][..., sl] = v
 
 
-
 #: The arrays of a :class:`CompactedState` that stay in the bounce's :class:`Next` until needed.
 _DEFERRED = ("beta", "owner", "rep", "pdf", "specular", "extra")
 
@@ -319,22 +318,24 @@ class CompactedState(PathState):
     def __len__(self) -> int:
         return len(self._index)
 
+    def _deferred(self, j: np.ndarray) -> tuple:
+        """The deferred arrays (in the order of :data:`_DEFERRED`) of the source's entries ``j``."""
+        src = self.__dict__["_source"]
+        return (take(src.beta, j), take(src.owner, j), take(src.rep, j), take(src.pdf, j), take(src.specular, j),
+                {k: take(v, j) for k, v in src.extra.items()})
+
     def __getattr__(self, name):  # only for attributes not yet set: the deferred ones
         if name not in _DEFERRED:
             raise AttributeError(name)
-        src, j = self.__dict__["_source"], self.__dict__["_index"]
-        self.beta, self.owner, self.rep = take(src.beta, j), take(src.owner, j), take(src.rep, j)
-        self.pdf, self.specular = take(src.pdf, j), take(src.specular, j)
-        self.extra = {k: take(v, j) for k, v in src.extra.items()}
+        self.__dict__.update(zip(_DEFERRED, self._deferred(self.__dict__["_index"]), strict=True))
         return self.__dict__[name]
 
     def take(self, idx) -> PathState:
         if "beta" in self.__dict__:
             return PathState.take(self, idx)
-        src, j = self._source, self._index[idx]
         o, d = (self.o[:, idx], self.d[:, idx]) if isinstance(idx, slice) else (take(self.o, idx), take(self.d, idx))
-        return PathState(o, d, take(src.beta, j), take(src.owner, j), take(src.rep, j), take(src.pdf, j),
-                         take(src.specular, j), {k: take(v, j) for k, v in src.extra.items()})
+        return PathState(o, d, *self._deferred(self._index[idx]))
+
 
 def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl: slice,
                          rows: np.ndarray | None = None) -> list[PathState]:
