@@ -37,17 +37,18 @@ def take(a: np.ndarray, idx) -> np.ndarray:
 
     It is np.take in mode "wrap": for indices in [-n, n) the same values as np.take and fancy indexing
     (-1 is the last entry, which the tables with a column appended for misses rely on), without their
-    bounds check, which in numpy 1.26 makes a take along the last axis of a (3, n) plane 2-3 times as
-    slow (fancy indexing ``a[:, idx]``, 8 times). Indices come from the tracer itself (argsort,
-    flatnonzero, face and slot ids), never from input: one out of range would wrap silently.
+    bounds check, which in numpy 1.26 makes a take along the last axis of a (3, n) plane 1.5 to 2.5
+    times as slow (fancy indexing ``a[:, idx]``, 5 to 7 times; benchmarks/gather.py). Indices come
+    from the tracer itself (argsort, flatnonzero, face and slot ids), never from input: one out of
+    range would wrap silently.
     """
     return np.take(a, idx, axis=-1, mode="wrap")
 
 
 def put(a: np.ndarray, idx, v) -> None:
     """``a[..., idx] = v``, one row of the last axis at a time where ``idx`` is an index array (a
-    two-dimensional fancy assignment takes twice as long in numpy 1.26). ``v`` broadcasts to
-    ``a[..., idx]``."""
+    two-dimensional fancy assignment takes about twice as long in numpy 1.26; benchmarks/gather.py).
+    ``v`` broadcasts to ``a[..., idx]``."""
     if isinstance(idx, slice):
         a[..., idx] = v
         return
