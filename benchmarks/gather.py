@@ -33,9 +33,9 @@ def main():
     v = rng.random((3, len(idx)))
     print(f"numpy {np.__version__}: (3, {n:,}) float64, 60,000 columns")
     for label, index in (("sorted", idx), ("permuted", perm)):
-        base = best_us(lambda: np.take(a, index, axis=1))
-        wrap = best_us(lambda: take(a, index))
-        fancy = best_us(lambda: a[:, index])
+        base = best_us(lambda index=index: np.take(a, index, axis=1))
+        wrap = best_us(lambda index=index: take(a, index))
+        fancy = best_us(lambda index=index: a[:, index])
         print(f"gather {label:8s}: np.take {base:7.0f} us, tracer.vec.take (mode wrap) {wrap:7.0f} us "
               f"({base / wrap:.1f} x as fast), a[:, idx] {fancy:7.0f} us ({fancy / wrap:.1f} x as slow)")
     fancy_set = best_us(lambda: a.__setitem__((slice(None), idx), v))
