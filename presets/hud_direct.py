@@ -117,6 +117,9 @@ def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tu
 #: by the condenser's magnification c / u, so their images tile the eyebox as before.
 CONDENSER = {"r": 21.0, "thickness": 9.0, "semi_diameter": 16.0, "ior": 1.52}
 CONDENSER_GAP = 20.0
+#: The scatterer's aim covers the pupil's images through the windshield's primary reflection and its
+#: ghosts 1 to AIM_GHOSTS (ghost k: 2 k - 1 internal reflections).
+AIM_GHOSTS = 2
 #: Radius (mm) of the condenser's central zone that the LEDs aim at.
 CONDENSER_AIM_RADIUS = 12.0
 
@@ -177,14 +180,15 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
            frame_matrix(scat_center, x_axis, -r2))
     # The eye pupil imaged by windshield and mirror: a virtual aperture at the centre LED. The ghost
     # path (outer windshield surface) images it displaced by the plate offset 2 t tan(theta') cos(theta)
-    # times the mirror's magnification d1/d2, in the plane of incidence, and the path with two more
-    # internal reflections by twice that; one disk covers the three images.
+    # times the mirror's magnification d1/d2, in the plane of incidence, and the path with 2 k - 1
+    # internal reflections (ghost k) by k times that; one disk covers the images of ghosts 0 to K.
     theta = math.radians(d["incidence_windshield_deg"])
     theta_t = math.asin(math.sin(theta) / 1.52)
     ghost_shift = 2 * GLASS_MM * math.tan(theta_t) * math.cos(theta) * LED_TO_MIRROR / d["d2"]
     across = np.cross(x_axis, r2)
-    sb.add("pupil_image", disk(pupil_image_r + ghost_shift + 0.2, 64), {"type": "aperture"},
-           frame_matrix(d["led"] + ghost_shift * across - 0.01 * r2, x_axis, -r2))
+    half = 0.5 * AIM_GHOSTS * ghost_shift
+    sb.add("pupil_image", disk(pupil_image_r + half + 0.2, 64), {"type": "aperture"},
+           frame_matrix(d["led"] + half * across - 0.01 * r2, x_axis, -r2))
     # LED dies facing the scatterer, aimed at it: a grid centred on the design LED position, so that
     # their images tile the eyebox. With a condenser, the dies sit closer on a smaller grid (its virtual
     # image is the design grid).
