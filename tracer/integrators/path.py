@@ -344,13 +344,15 @@ def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl
     into the hits), only those paths sample, into their own entries of ``nxt``; the random numbers are
     drawn for every hit all the same, so that the stream does not depend on which."""
     u = ctx.rng.random((sampler.dims, len(it)), F32) if sampler.dims else None
+    polar = ctx.world.polar
+    if polar is not None and "stokes" in state.extra:  # what two-branch materials choose by
+        it.polar = (state.extra["stokes"], state.extra["frame"])
     if rows is not None:
         if len(rows) == 0:
             return []
         state, it, u, sl = state.take(rows), it.take(rows), None if u is None else take(u, rows), sl.start + rows
     s = sampler.sample(it, u, mode)
-    polar = ctx.world.polar
-    if polar is not None and "stokes" in state.extra:
+    if it.polar is not None:
         bsdf = getattr(sampler, "own", sampler)  # an aimed mixture scatters by its material's law
         beta, stokes, frame = polar.scatter(state.beta, state.extra, it, bsdf, s.wo, s.weight, s.flags,
                                             mode == IMPORTANCE)

@@ -46,6 +46,9 @@ class Interaction:
     objects' slots in the world.
     offset : (n,) the faces' spawn offsets (mm; tracer.accel), or None.
     cache : per-interaction values a material computes once (its local frames).
+    polar : in a polarised world, the arriving paths' state (stokes (3, C, n), frame (3, n); see
+        tracer.optics.polar), so that a material with two delta branches can choose between them by
+        what the path carries; None elsewhere.
     """
 
     d: np.ndarray
@@ -56,6 +59,7 @@ class Interaction:
     slot: np.ndarray
     offset: np.ndarray | None = None
     cache: dict = field(default_factory=dict)
+    polar: tuple | None = None
 
     def __len__(self) -> int:
         return self.d.shape[1]
@@ -81,6 +85,7 @@ class Interaction:
         out = Interaction(t(self.d), t(self.p), ng, ns if ns is not None else ng, t(self.uv), self.slot[idx],
                           t(self.offset))
         out.cache = {k: part(v) for k, v in self.cache.items()}
+        out.polar = None if self.polar is None else part(self.polar)
         return out
 
     @staticmethod

@@ -109,6 +109,15 @@ def rotation(x_from: np.ndarray, x_to: np.ndarray, k: np.ndarray) -> tuple[np.nd
     return (c * c - s * s) * inv, 2 * c * s * inv
 
 
+def state_s1(state: tuple, x: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """S1 / S0 (C, n) of paths' states ``state`` = (stokes (3, C, n), frame (3, n)) re-written in the
+    frame x (3, n) about the light's direction k: what a diattenuator with axis x makes of them
+    (S0' / S0 = 1 + b s1)."""
+    stokes, frame = state
+    c2, s2 = rotation(frame, x, k)
+    return c2 * stokes[0] + s2 * stokes[1]
+
+
 def rotate(stokes: np.ndarray, x_from: np.ndarray, x_to: np.ndarray, k: np.ndarray) -> np.ndarray:
     """S1..S3 (3, C, n) (or (3, n)) written in frame x_from, re-written in x_to (rotation about k).
     Row vectors of camera paths rotate the same way (the rotator is orthogonal)."""
