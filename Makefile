@@ -58,7 +58,8 @@ test-bpy-oldest: $(STAMP42)
 # 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs (the
 # unpolarised model and hud-direct's default, 6 minutes each), the eyebox scan
 # and the two hud-screen renders of docs/hud-screen-variants.png; then polarisation: Mitsuba's polarised variant
-# on a windshield and a panel, 3 minutes, and the cost of polarised transport, 3 minutes).
+# on a windshield and a panel, 3 minutes, the cost of polarised transport, 3 minutes, and forward tracing per
+# windshield ghost order, 3 minutes).
 # Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15
 # crash it), installed here when missing; without root or apt-get it runs the scalar variant and says so.
 LLVM19 = ls /usr/lib/*/libLLVM.so.19* 2>/dev/null | head -n 1
@@ -78,3 +79,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/screen_variants.py --seconds 120
 	$(PY) benchmarks/mitsuba_polarised.py --spp 8192
 	$(PY) benchmarks/polarisation_cost.py --seconds 8 --repeats 3
+	$(PY) benchmarks/ghost_orders.py --rays 1e8
