@@ -61,14 +61,17 @@ class CountingForward(ForwardTracer):
         finally:
             self._pilot = False
 
+    def _counts(self, batch: int, n: int) -> np.ndarray:
+        """The event counts of ``batch``'s particles, at least n long (particle ids index it)."""
+        count = self.events.get(batch, np.zeros(0, np.int32))
+        if len(count) < n:
+            count = self.events[batch] = np.concatenate([count, np.zeros(n - len(count), np.int32)])
+        return count
+
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
-        if bsdf is self.counted:
-            add = np.bincount(state.owner, minlength=self.batch_size).astype(np.int32)
-            count = self.events.get(ctx.batch, np.zeros(0, np.int32))
-            if len(count) < len(add):
-                count = np.concatenate([count, np.zeros(len(add) - len(count), np.int32)])
-            count[:len(add)] += add
-            self.events[ctx.batch] = count
+        if bsdf is self.counted and len(state):
+            add = np.bincount(state.owner)
+            self._counts(ctx.batch, len(add))[:len(add)] += add
         return super().continue_paths(state, it, bsdf, ctx, nxt, sl)
 
     def sensor(self, state, t, ctx):
@@ -77,17 +80,13 @@ class CountingForward(ForwardTracer):
         k = np.flatnonzero(t_eye < t)
         if len(k) and not self._pilot:
             pix = eye.pixel_of(*eye.retina_point(take(lens, k), take(state.d, k)))
-            ok = pix >= 0
-            k, pix = k[ok], pix[ok]
-            count = self.events.get(ctx.batch, np.zeros(0, np.int32))
-            owner = state.owner[k]
-            count = np.where(owner < len(count), count[np.minimum(owner, max(len(count) - 1, 0))], 0) \
-                if len(count) else np.zeros(len(k), np.int32)
-            value = take(state.beta, k)
+            k, pix = k[pix >= 0], pix[pix >= 0]
+            arrived = state.take(k)
+            value = arrived.beta
             if self.world.polar is not None:
-                value = self.world.polar.detect(value, {a: take(v, k) for a, v in state.extra.items()},
-                                                take(state.d, k))
-            self.arrivals.append((count.copy(), pix, luminance3(value) / eye.extent[pix]))
+                value = self.world.polar.detect(value, arrived.extra, arrived.d)
+            count = self._counts(ctx.batch, int(arrived.owner.max(initial=-1)) + 1)[arrived.owner]
+            self.arrivals.append((count, pix, luminance3(value) / eye.extent[pix]))
         return super().sensor(state, t, ctx)
 
 

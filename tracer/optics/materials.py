@@ -56,13 +56,13 @@ def _energy_check(params: dict, fail):
 POLARISED_CHOICE = True
 
 
-def polarised_share(it: Interaction, mode: str, x: np.ndarray, w_a, w_b, b_a, b_b) -> np.ndarray:
+def polarised_share(it: Interaction, mode: str, x: np.ndarray, p, w_a, w_b, b_a, b_b) -> np.ndarray:
     """The probability (n,) of the first of two delta branches for paths in the state ``it.polar``: the
-    defensive mixture (Hesterberg 1995, doi:10.1080/00401706.1995.10484303) of the unpolarised share
-    w_a / (w_a + w_b) and the path's own share a_a / (a_a + a_b), a = w (1 + b s1), with w a branch's
-    unpolarised weight ((n,), or (3, n) RGB taken by luminance), b its diattenuation (the first element
-    of its normalised Mueller row, tracer.optics.polar) and s1 the path's S1 / S0 in the branches' s/p
-    frame ``x``.
+    defensive mixture (Hesterberg 1995, doi:10.1080/00401706.1995.10484303) of the material's
+    unpolarised probability ``p`` and the path's own share a_a / (a_a + a_b), a = w (1 + b s1), with w a
+    branch's unpolarised weight ((n,), or (3, n) RGB taken by luminance), b its diattenuation (the
+    first element of its normalised Mueller row, tracer.optics.polar) and s1 the path's S1 / S0 in the
+    branches' s/p frame ``x``.
 
     The own share is the branch's part of the flux of the path's state (R_s for s light): chosen by
     the unpolarised R alone, a chain of k reflections of s light at a windshield (R_s = 0.26 against
@@ -70,21 +70,18 @@ def polarised_share(it: Interaction, mode: str, x: np.ndarray, w_a, w_b, b_a, b_
     (R_s / R)^k, so that ghosts of the third and higher orders come in rare, heavy samples. The own
     share alone would in turn sample p light's reflection (R_p = 0.02) 7 times as rarely as today,
     where the reflection is what reaches the eye; the even mixture keeps every branch's second moment
-    within twice that of the better of the two rules. Unpolarised paths (s1 = 0) get the unpolarised
-    share."""
+    within twice that of the better of the two rules."""
     k = it.d if mode != RADIANCE else -it.d  # camera paths' frames are those of the light toward the eye
     s1 = state_s1(it.polar, x, k)
 
-    def share(a, b):
-        total = a + b
-        return np.where(total > 0, a / np.where(total > 0, total, 1), 0)
-
-    def carried(w, b=0.0):
+    def carried(w, b):
         a = w * np.maximum(1 + b * s1, 0)
         return luminance3(a) if a.shape[0] == 3 else a.mean(axis=0)
 
-    own = share(carried(w_a, b_a), carried(w_b, b_b))
-    return (0.5 * (share(carried(w_a), carried(w_b)) + own)).astype(F32)
+    a, b = carried(w_a, b_a), carried(w_b, b_b)
+    total = a + b
+    own = np.where(total > 0, a / np.where(total > 0, total, 1), p)
+    return (0.5 * (p + own)).astype(F32)
 
 
 def _absorbed(n: int) -> BSDFSample:
@@ -273,7 +270,7 @@ class Dielectric(BSDF):
             w = F32(1) if mode != RADIANCE else np.where(refl, F32(1), 1 / (eta * eta))
         else:
             x, refl_sp, refr_sp = self._sp(it)
-            q = np.where(r >= 1, F32(1), polarised_share(it, mode, x, r, 1 - r, refl_sp[0], refr_sp[0]))
+            q = polarised_share(it, mode, x, r, r, 1 - r, refl_sp[0], refr_sp[0])  # 1 at total reflection
             refl = u[0] < q
             t = 1 - r if mode != RADIANCE else (1 - r) / (eta * eta)
             w = np.where(refl, r / np.maximum(q, TINY), t / np.maximum(1 - q, TINY)).astype(F32)
@@ -376,11 +373,10 @@ class Coating(BSDF):
     def sample(self, it, u, mode):
         n = len(it)
         r, t = self.gather(self.r, it), self.gather(self.t, it)
+        p = self.gather(self.p_reflect, it)
         if self.polarising and it.polar is not None and POLARISED_CHOICE:
-            p = polarised_share(it, mode, _reflection_frame(it), r, t, self.gather(self.sp_reflect[0], it),
+            p = polarised_share(it, mode, _reflection_frame(it), p, r, t, self.gather(self.sp_reflect[0], it),
                                 self.gather(self.sp_transmit[0], it))
-        else:
-            p = self.gather(self.p_reflect, it)
         refl = u[0] < p
         out = np.where(refl, mirror_directions(it), it.d)
         w = np.where(refl, r / np.maximum(p, TINY), t / np.maximum(1 - p, TINY))
