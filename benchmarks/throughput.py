@@ -11,7 +11,10 @@ very rays each method traces (recorded from 8 of its batches, bounce by bounce, 
 queries, and replayed through the same Embree calls, best of 5): the ceiling for that method's ray mix.
 End to end: every method variant (forward; backward with next-event estimation; backward without it,
 the paper's plain method) for S seconds, on one process and on W worker processes (tracer.parallel; the
-clock starts once every worker has built its world, as in a render, and the start-up is printed apart),
+clock starts once every worker has built its world, as in a render, and the start-up is printed apart;
+"workers busy" is the share of the workers' time spent inside batches, the rest the pool's own cost,
+and "per batch" the rays per second inside a worker's batches against one process's: the machine's own
+scaling, so that the ratio is W x busy x per batch),
 alternating R times (medians: the machine's speed drifts between runs). "Steady" rates leave out the
 first batch. Per stage: the share of one process's wall time spent in each stage of the path loop
 (intersect, sensor, shade, shadow, film, other). Peak memory is the largest resident set of this
@@ -75,6 +78,13 @@ def tracing_rate(res) -> float:
     """Rays per second from the first batch issued to the end: a render's wall time less its set-up
     (the pilot and the workers' start-up, which a time budget includes; reported separately)."""
     return res.rays / max(res.seconds - res.extra.get("setup_seconds", 0.0), 1e-9)
+
+
+def busy_share(res, workers: int) -> float:
+    """The share of ``workers`` processes' time, from the first batch issued to the end, spent inside
+    batches (the sum of their stage timers): the rest is the pool's own cost (results crossing the
+    pipes, the parent's merges) and workers idle at the deadline, apart from the machine's scaling."""
+    return sum(res.stages.values()) / (workers * max(res.seconds - res.extra.get("setup_seconds", 0.0), 1e-9))
 
 
 def raw_embree_rate(scene, n: int = 1 << 20, repeats: int = 5) -> float:
@@ -158,7 +168,7 @@ def main():
             print(f"{label:16s} raw embreex on its own rays: {own:,.0f} rays/s")
             # One process and W processes alternate, --repeats times, and the medians are compared:
             # this machine's speed drifts by tens of percent between runs a minute apart.
-            one, many, stages, startup = [], [], [], []
+            one, many, stages, startup, busy, inside = [], [], [], [], [], []
             for r in range(args.repeats):
                 res = make(world, label, 1 + r).render(Budget(seconds=args.seconds))
                 par = render_parallel(make(world, label, 1 + r), Budget(seconds=args.seconds), args.workers)
@@ -166,9 +176,12 @@ def main():
                 many.append((tracing_rate(par), par.extra["steady_rays_per_second"]))
                 stages.append({k: v / (res.seconds - res.extra["setup_seconds"]) for k, v in res.stages.items()})
                 startup.append(par.extra["startup_seconds"])
+                busy.append(busy_share(par, args.workers))
+                inside.append((par.rays / sum(par.stages.values())) / (res.rays / sum(res.stages.values())))
                 print(f"{label:16s} run {r + 1}: one process {tracing_rate(res):,.0f} rays/s ({res.rays:,} rays in "
                       f"{res.seconds:.1f} s), {args.workers} processes {tracing_rate(par):,.0f} rays/s "
-                      f"({par.rays:,} rays in {par.seconds:.1f} s, start-up {par.extra['startup_seconds']:.1f} s); "
+                      f"({par.rays:,} rays in {par.seconds:.1f} s, start-up {par.extra['startup_seconds']:.1f} s, "
+                      f"workers busy {busy[-1]:.3f}); "
                       f"efficiency {res.efficiency:.3g}", flush=True)
             (rate, steady), (par_rate, par_steady) = np.median(one, axis=0), np.median(many, axis=0)
             share = {k: float(np.median([s.get(k, 0.0) for s in stages])) for k in stages[0]}
@@ -176,7 +189,8 @@ def main():
                   f"of raw on its own rays")
             print(f"{label:16s} on {args.workers} processes (median): {par_rate:,.0f} rays/s = {par_rate / rate:.2f} x "
                   f"one process; steady (without the first batch) {par_steady / steady:.2f} x; start-up "
-                  f"{np.median(startup):.1f} s, not in the rate")
+                  f"{np.median(startup):.1f} s, not in the rate; workers busy {np.median(busy):.3f} of the time, "
+                  f"per batch {np.median(inside):.3f} x one process's speed")
             print(f"{label:16s} stages (share of one process's wall time): "
                   + ", ".join(f"{k} {v:.2f}" for k, v in share.items()))
         # Only this process: a spawned worker's ru_maxrss starts from the parent's resident size at the

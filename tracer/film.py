@@ -17,7 +17,10 @@ pixels, a connection, a photon. Replicates have equal normalisers, so the mean o
 image itself.
 
 Sums merge exactly: a film from another process adds to this one term by term (tracer.parallel adds
-batches in batch order, so the same batches give the same image bit for bit).
+batches in batch order, so the same batches give the same image bit for bit). A batch whose light
+landed in few pixels (a forward batch: a few thousand particles on the retina) travels as those
+pixels' columns only (:class:`Columns`), a fiftieth of the dense arrays; adding it gives the same
+bits as adding the dense arrays, whose other columns are zeros.
 
 Groups. Components traced independently of each other (the hybrid method's channels: each its own
 method, its own random streams, its own replicates) form groups; each group keeps its own replicate
@@ -29,6 +32,38 @@ from __future__ import annotations
 import numpy as np
 
 from .units import luminance3
+
+#: A batch's film travels as its non-zero pixel columns (:class:`Columns`) when they are fewer than
+#: this share of the pixels.
+SPARSE_SHARE = 0.25
+
+
+class Columns:
+    """The columns ``idx`` (m,) of a per-pixel array whose other columns are zero: ``values`` (..., m)."""
+
+    __slots__ = ("idx", "values")
+
+    def __init__(self, idx: np.ndarray, values: np.ndarray):
+        self.idx, self.values = idx, values
+
+    def __getstate__(self):
+        return self.idx, self.values
+
+    def __setstate__(self, state):
+        self.idx, self.values = state
+
+
+def _pack(a: np.ndarray, idx: np.ndarray | None):
+    """``a`` as it travels: its columns ``idx`` (:class:`Columns`), or whole where ``idx`` is None."""
+    return a if idx is None else Columns(idx, a[..., idx])
+
+
+def _add(total: np.ndarray, a) -> None:
+    """``total += a`` for a dense array or :class:`Columns` (the same bits either way: x + 0 = x)."""
+    if isinstance(a, Columns):
+        total[..., a.idx] += a.values
+    else:
+        total += a
 
 
 class _Replicates:
@@ -52,13 +87,13 @@ class _Replicates:
             self.mean_sq += float((means * means).sum())
         self.count += replicates
 
-    def arrays(self) -> tuple:
-        return self.sum, self.sq, self.mean_sum, self.mean_sq, self.count
+    def arrays(self, idx: np.ndarray | None = None) -> tuple:
+        return _pack(self.sum, idx), _pack(self.sq, idx), self.mean_sum, self.mean_sq, self.count
 
     def merge(self, data: tuple):
         s, sq, mean_sum, mean_sq, count = data
-        self.sum += s
-        self.sq += sq
+        _add(self.sum, s)
+        _add(self.sq, sq)
         self.mean_sum += mean_sum
         self.mean_sq += mean_sq
         self.count += count
@@ -133,11 +168,20 @@ class Film:
 
     # -- merging ---------------------------------------------------------------------------------
     def arrays(self) -> tuple:
-        """Everything a batch contributes, as plain arrays and numbers (what workers send back)."""
+        """Everything a batch contributes, as arrays and numbers (what workers send back): the
+        per-pixel arrays whole, or as their non-zero columns (:class:`Columns`) where those are fewer
+        than :data:`SPARSE_SHARE` of the pixels."""
         names = list(self.kinds)
-        return (names, [self.sums[k] for k in names], [self.norm[k] for k in names],
-                [self.comp_rep_sum[k] for k in names], [self.comp_rep_sq[k] for k in names],
-                {g: r.arrays() for g, r in self.groups.items()})
+        per_pixel = [*self.sums.values(), *self.comp_rep_sum.values(), *self.comp_rep_sq.values(),
+                     *(a for g in self.groups.values() for a in (g.sum, g.sq))]
+        used = np.zeros(self.pixels, bool)
+        for a in per_pixel:
+            used |= (a != 0) if a.ndim == 1 else (a != 0).any(axis=0)
+        idx = np.flatnonzero(used)
+        idx = idx if len(idx) < SPARSE_SHARE * self.pixels else None
+        return (names, [_pack(self.sums[k], idx) for k in names], [self.norm[k] for k in names],
+                [_pack(self.comp_rep_sum[k], idx) for k in names], [_pack(self.comp_rep_sq[k], idx) for k in names],
+                {g: r.arrays(idx) for g, r in self.groups.items()})
 
     def merge_arrays(self, data: tuple, prefix: str = "", group: str | None = None):
         """Add another film's :meth:`arrays`; with ``prefix``, its components are this film's
@@ -146,10 +190,10 @@ class Film:
         names, sums, norms, c_sum, c_sq, groups = data
         for i, k in enumerate(names):
             k = prefix + k
-            self.sums[k] += sums[i]
+            _add(self.sums[k], sums[i])
             self.norm[k] += norms[i]
-            self.comp_rep_sum[k] += c_sum[i]
-            self.comp_rep_sq[k] += c_sq[i]
+            _add(self.comp_rep_sum[k], c_sum[i])
+            _add(self.comp_rep_sq[k], c_sq[i])
         for g, rep in groups.items():
             self.groups[g if group is None else group].merge(rep)
 
