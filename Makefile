@@ -73,6 +73,7 @@ bench: $(STAMP)
 		echo "bench: libllvm19 could not be installed (needs root and apt-get): Mitsuba runs its scalar variant"
 	DRJIT_LIBLLVM_PATH="$$($(LLVM19))" $(PY) benchmarks/mitsuba_peer.py
 	$(PY) benchmarks/gather.py
+	$(PY) benchmarks/fused_kernel.py
 	$(PY) benchmarks/throughput.py --seconds 10 --repeats 3 --polarisation off
 	$(PY) benchmarks/throughput.py --seconds 10 --repeats 3
 	$(PY) benchmarks/eyebox.py --half 90 30 --step 10
