@@ -19,8 +19,8 @@ image itself.
 Sums merge exactly: a film from another process adds to this one term by term (tracer.parallel adds
 batches in batch order, so the same batches give the same image bit for bit). A batch whose light
 landed in few pixels (a forward batch: a few thousand particles on the retina) travels as those
-pixels' columns only (:class:`Columns`), a fiftieth of the dense arrays; adding it gives the same
-bits as adding the dense arrays, whose other columns are zeros.
+pixels' columns only (:class:`Columns`; on hud-direct about 95 KiB instead of 3.5 MiB); adding it
+gives the same bits as adding the dense arrays, whose other columns are zeros.
 
 Groups. Components traced independently of each other (the hybrid method's channels: each its own
 method, its own random streams, its own replicates) form groups; each group keeps its own replicate
