@@ -1,5 +1,5 @@
-"""What a fused kernel would buy: one stage of the path loop written as a numba kernel, against the
-tracer's own numpy code on the very rays a render gives that stage.
+"""What a fused kernel would buy: two stages of the path loop written as numba kernels, against the
+tracer's own numpy code on the very rays a render gives each stage.
 
     .venv/bin/python benchmarks/fused_kernel.py [--batches B] [--repeats R]
 
@@ -11,6 +11,10 @@ recorded from B batches of a backward render of hud-direct (unpolarised: ``"pola
 every call of the windshield's material, so the sizes and the mix of front and back faces are a
 render's. Both are checked to agree (directions and weights to float32 rounding, the same branch and
 flags everywhere but where u lies within float32 rounding of R), then timed (best of R) per ray.
+
+The second stage: the scatterer's Gaussian lobe density (tracer.sampling.gaussian_lobe_pdf, an exp per
+ray), on the calls the same batches make of it (next-event connections and the mixture's densities),
+checked to agree to float32 rounding (numba's exp is the C library's, numpy's its own SIMD one).
 
 This is a measurement for a decision (README, "Speed": the one-process goal needs fused kernels), not
 part of the tracer: numba is in requirements-bench.lock only.
@@ -29,10 +33,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import tracer.optics.materials as materials  # noqa: E402
 from presets import PRESETS  # noqa: E402
 from tracer.integrators import INTEGRATORS  # noqa: E402
 from tracer.optics.bsdf import DELTA, RADIANCE, REFLECTION, TRANSMISSION, Interaction  # noqa: E402
 from tracer.optics.materials import Dielectric  # noqa: E402
+from tracer.sampling import gaussian_lobe_pdf  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.world import World  # noqa: E402
 
@@ -91,29 +97,45 @@ def dielectric_sample(d, p, ng, ns, n_in, n_out, offset, u, radiance, wo, o, wei
         o[0, i], o[1, i], o[2, i] = p[0, i] + off * gx, p[1, i] + off * gy, p[2, i] + off * gz
 
 
+@numba.njit(cache=True, fastmath=False)
+def lobe_pdf(d, beta0, sigma, out):
+    """gaussian_lobe_pdf ray by ray: g2(beta - beta0; sigma) d_z for d_z > 0, else 0 (float32)."""
+    for i in range(d.shape[1]):
+        s0, s1 = sigma[0, i], sigma[1, i]
+        zx = (d[0, i] - beta0[0, i]) * (np.float32(1.0) / s0)
+        zy = (d[1, i] - beta0[1, i]) * (np.float32(1.0) / s1)
+        g2 = np.exp(np.float32(-0.5) * (zx * zx + zy * zy)) * (np.float32(1.0) / (np.float32(2 * np.pi) * s0 * s1))
+        out[i] = g2 * d[2, i] if d[2, i] > 0 else np.float32(0.0)
+
+
 def record(batches: int):
-    """The glass's calls in ``batches`` backward batches of hud-direct: (world, material, [(it, u, mode)])."""
+    """The glass's calls and the lobe density's in ``batches`` backward batches of hud-direct:
+    (world, [(material, it, u, mode)], [(d, beta0, sigma)])."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = PRESETS["hud-direct"].write(Path(tmp) / "s")
         data = json.loads((folder / "scene.json").read_text())
         (folder / "scene.json").write_text(json.dumps(data | {"polarisation": "off"}))
         world = World(load_scene(folder))
-    glass = [m for m in world.materials if isinstance(m, Dielectric)]
-    calls = []
-    original = Dielectric.sample
+    calls, lobes = [], []
+    original, original_pdf = Dielectric.sample, materials.gaussian_lobe_pdf
 
     def rec(self, it, u, mode):
         calls.append((self, Interaction(it.d, it.p, it.ng, it.ns, it.uv, it.slot, it.offset), u.copy(), mode))
         return original(self, it, u, mode)
 
-    Dielectric.sample = rec
+    def rec_pdf(d, beta0, sigma):
+        sigma = np.broadcast_to(np.asarray(sigma, d.dtype).reshape(2, -1), (2, d.shape[1]))
+        lobes.append(tuple(np.ascontiguousarray(a, np.float32) for a in (d, beta0, sigma)))
+        return original_pdf(d, beta0, sigma)
+
+    Dielectric.sample, materials.gaussian_lobe_pdf = rec, rec_pdf
     try:
         integ = INTEGRATORS["backward"](world, 1)
         for k in range(batches):
             integ.trace_batch(k)
     finally:
-        Dielectric.sample = original
-    return world, glass, calls
+        Dielectric.sample, materials.gaussian_lobe_pdf = original, original_pdf
+    return world, calls, lobes
 
 
 def numpy_stage(world, mat, it, u, mode):
@@ -133,14 +155,25 @@ def fused_stage(mat, it, u, mode):
     return wo, o, weight, flags
 
 
+def best_time(fn, items, repeats: int) -> float:
+    """Seconds of ``fn`` over every item, best of ``repeats``."""
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for c in items:
+            fn(c)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--batches", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args()
-    world, glass, calls = record(args.batches)
+    world, calls, lobes = record(args.batches)
     rays = sum(len(c[1]) for c in calls)
-    print(f"recorded {len(calls)} calls of the glass ({rays:,} rays, {rays / max(len(calls), 1):,.0f} per call) "
+    print(f"glass: recorded {len(calls)} calls ({rays:,} rays, {rays / max(len(calls), 1):,.0f} per call) "
           f"from {args.batches} backward batches of hud-direct")
     # Agreement, call by call.
     worst_dir = worst_o = 0.0
@@ -154,22 +187,28 @@ def main():
         worst_o = max(worst_o, float(np.abs(o[:, same] - o_np[:, same]).max(initial=0)))
         w_np = np.broadcast_to(s.weight[0], (len(it),))
         np.testing.assert_allclose(weight[same], w_np[same], rtol=1e-6)
-    print(f"agreement: branch differs at {disagree} of {rays:,} rays (u within rounding of R); largest difference "
+    print(f"glass: branch differs at {disagree} of {rays:,} rays (u within rounding of R); largest difference "
           f"elsewhere: directions {worst_dir:.2e}, origins {worst_o:.2e} mm")
     assert disagree <= 1e-4 * rays and worst_dir < 1e-5 and worst_o < 1e-6
     # Speed: each stage over every recorded call, best of the repeats.
-    times = {}
-    for name, fn in (("numpy (the tracer)", lambda c: numpy_stage(world, c[0], c[1], c[2], c[3])),
-                     ("numba, fused", lambda c: fused_stage(c[0], c[1], c[2], c[3]))):
-        best = np.inf
-        for _ in range(args.repeats):
-            t = time.perf_counter()
-            for c in calls:
-                fn(c)
-            best = min(best, time.perf_counter() - t)
-        times[name] = best
-        print(f"{name:20s} {1e9 * best / rays:7.1f} ns per ray")
-    print(f"fused / numpy: {times['numpy (the tracer)'] / times['numba, fused']:.1f} x as fast")
+    t_np = best_time(lambda c: numpy_stage(world, c[0], c[1], c[2], c[3]), calls, args.repeats)
+    t_nb = best_time(lambda c: fused_stage(c[0], c[1], c[2], c[3]), calls, args.repeats)
+    print(f"glass: numpy (the tracer) {1e9 * t_np / rays:.1f} ns per ray, numba {1e9 * t_nb / rays:.1f}: "
+          f"numba {t_np / t_nb:.1f} x as fast")
+
+    n_lobe = sum(c[0].shape[1] for c in lobes)
+    outs = [np.empty(c[0].shape[1], np.float32) for c in lobes]
+    worst = 0.0
+    for (d, beta0, sigma), out in zip(lobes, outs, strict=True):
+        lobe_pdf(d, beta0, sigma, out)
+        ref = gaussian_lobe_pdf(d, beta0, sigma)
+        worst = max(worst, float((np.abs(out - ref) / np.maximum(ref.max(initial=0), 1e-30)).max(initial=0)))
+    print(f"lobe density: {len(lobes)} calls, {n_lobe:,} rays; largest difference {worst:.1e} of the call's peak")
+    assert worst < 1e-5
+    t_np = best_time(lambda c: gaussian_lobe_pdf(*c), lobes, args.repeats)
+    t_nb = best_time(lambda c: lobe_pdf(*c[0], c[1]), list(zip(lobes, outs, strict=True)), args.repeats)
+    print(f"lobe density: numpy (the tracer) {1e9 * t_np / n_lobe:.1f} ns per ray, numba {1e9 * t_nb / n_lobe:.1f}: "
+          f"numba {t_np / t_nb:.2f} x as fast")
 
 
 if __name__ == "__main__":
