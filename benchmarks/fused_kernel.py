@@ -3,7 +3,7 @@ tracer's own numpy code on the very rays a render gives each stage.
 
     .venv/bin/python benchmarks/fused_kernel.py [--batches B] [--repeats R]
 
-The stage: glass (tracer.optics.materials.Dielectric, unpolarised) sampling its branch and the next
+The first stage: glass (tracer.optics.materials.Dielectric, unpolarised) sampling its branch and the next
 ray's origin, i.e. ``Dielectric.sample`` and ``Accelerator.spawn``: Fresnel's R from the incidence
 cosine, the branch chosen by R, the reflected or refracted direction (with the shading-normal
 fallbacks), the weight, the flags, and the origin offset to the side the ray leaves to. The inputs are
