@@ -355,8 +355,8 @@ def test_take_and_put_match_numpy_indexing():
 def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path):
     """A forward batch lights a few thousand of hud-direct's 65,520 pixels: its film travels as those
     columns (tracer.film.Columns), and merging it gives every array of the dense merge, bit for bit
-    (sums, per-component and per-group replicate sums and squares); a backward batch, which lights
-    most pixels, travels whole."""
+    (sums, per-component and per-group replicate sums and squares). A backward batch's connections
+    light most pixels and travel whole; its paths that hit an LED, a few hundred, as columns."""
     import pickle
 
     from tracer.film import SPARSE_SHARE, Columns
@@ -378,12 +378,14 @@ def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path)
         return ([film.sums[k] for k in film.kinds] + [film.comp_rep_sum[k] for k in film.kinds]
                 + [film.comp_rep_sq[k] for k in film.kinds] + [a for g in film.groups.values() for a in (g.sum, g.sq)])
 
-    for method, sparse in (("forward", True), ("backward", False)):
+    for method, sparse in (("forward", {"light": True}), ("backward", {"hit": True, "connection": False})):
         integ = INTEGRATORS[method](world, 3)
         batches = [pickle.loads(pickle.dumps(integ.trace_batch(k))) for k in range(3)]  # as from a worker
-        assert all(isinstance(b.film[1][0], Columns) == sparse for b in batches), method
-        if sparse:
-            assert 0 < len(batches[0].film[1][0].idx) < SPARSE_SHARE * world.eye.width * world.eye.height
+        for b in batches:
+            names, sums = b.film[0], b.film[1]
+            assert {k: isinstance(a, Columns) for k, a in zip(names, sums, strict=True)} == sparse, method
+            assert all(0 < len(a.idx) < SPARSE_SHARE * world.eye.width * world.eye.height
+                       for a in sums if isinstance(a, Columns))
         a, b = integ.new_film(), integ.new_film()
         for batch in batches:
             a.merge_arrays(batch.film)
