@@ -124,8 +124,7 @@ def record(batches: int):
         return original(self, it, u, mode)
 
     def rec_pdf(d, beta0, sigma):
-        sigma = np.broadcast_to(np.asarray(sigma, d.dtype).reshape(2, -1), (2, d.shape[1]))
-        lobes.append(tuple(np.ascontiguousarray(a, np.float32) for a in (d, beta0, sigma)))
+        lobes.append((d.copy(), beta0.copy(), np.array(sigma, d.dtype)))  # sigma as the tracer gives it
         return original_pdf(d, beta0, sigma)
 
     Dielectric.sample, materials.gaussian_lobe_pdf = rec, rec_pdf
@@ -197,16 +196,19 @@ def main():
           f"numba {t_np / t_nb:.1f} x as fast")
 
     n_lobe = sum(c[0].shape[1] for c in lobes)
-    outs = [np.empty(c[0].shape[1], np.float32) for c in lobes]
+    # The kernel's inputs: contiguous planes, sigma per ray, and an output array, made before timing.
+    kernel_args = [tuple(np.ascontiguousarray(a, np.float32) for a in
+                         (d, beta0, np.broadcast_to(sigma.reshape(2, -1), (2, d.shape[1]))))
+                   + (np.empty(d.shape[1], np.float32),) for d, beta0, sigma in lobes]
     worst = 0.0
-    for (d, beta0, sigma), out in zip(lobes, outs, strict=True):
-        lobe_pdf(d, beta0, sigma, out)
-        ref = gaussian_lobe_pdf(d, beta0, sigma)
+    for (d, beta0, sigma), args_nb in zip(lobes, kernel_args, strict=True):
+        lobe_pdf(*args_nb)
+        out, ref = args_nb[3], gaussian_lobe_pdf(d, beta0, sigma)
         worst = max(worst, float((np.abs(out - ref) / np.maximum(ref.max(initial=0), 1e-30)).max(initial=0)))
     print(f"lobe density: {len(lobes)} calls, {n_lobe:,} rays; largest difference {worst:.1e} of the call's peak")
     assert worst < 1e-5
     t_np = best_time(lambda c: gaussian_lobe_pdf(*c), lobes, args.repeats)
-    t_nb = best_time(lambda c: lobe_pdf(*c[0], c[1]), list(zip(lobes, outs, strict=True)), args.repeats)
+    t_nb = best_time(lambda c: lobe_pdf(*c), kernel_args, args.repeats)
     print(f"lobe density: numpy (the tracer) {1e9 * t_np / n_lobe:.1f} ns per ray, numba {1e9 * t_nb / n_lobe:.1f}: "
           f"numba {t_np / t_nb:.2f} x as fast")
 

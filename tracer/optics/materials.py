@@ -272,15 +272,20 @@ class Dielectric(BSDF):
             x, refl_sp, refr_sp = self._sp(it)
             q = polarised_share(it, mode, x, r, r, 1 - r, refl_sp[0], refr_sp[0])  # 1 at total reflection
             refl = u[0] < q
-            t = 1 - r if mode != RADIANCE else (1 - r) / (eta * eta)
+            t = self._refracted_weight(r, eta, mode)
             w = np.where(refl, r / np.maximum(q, TINY), t / np.maximum(1 - q, TINY)).astype(F32)
         flags = np.where(refl, DELTA | REFLECTION, DELTA | TRANSMISSION).astype(np.int8)
         d_r, d_t = self._branches(it)
         return BSDFSample(np.where(refl, d_r, d_t), np.broadcast_to(w, (1, len(it))), np.zeros(len(it), F32), flags)
 
+    @staticmethod
+    def _refracted_weight(r, eta, mode):
+        """The refracted branch's weight T = 1 - R, times (n_i / n_t)^2 for radiance (camera paths)."""
+        return 1 - r if mode != RADIANCE else (1 - r) / (eta * eta)
+
     def lobes(self, it, mode):
         side, n_face, eta, cos_i, r, cos_t = self._geometry(it)
-        t = 1 - r if mode != RADIANCE else (1 - r) / (eta * eta)
+        t = self._refracted_weight(r, eta, mode)
         d_r, d_t = self._branches(it)
         return [(d_r, r[None], DELTA | REFLECTION, "reflect"), (d_t, t[None], DELTA | TRANSMISSION, "refract")]
 
