@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, render, z_bound
+from conftest import ROOT, film_dof, render, t_bound, z_bound
 
 _BPY = importlib.util.find_spec("bpy")
 if _BPY is None:
@@ -528,9 +528,10 @@ def test_a_sun_light_exports_as_the_environments_sun(tmp_path):
     sc = load_scene(tmp_path / "frame1")
     assert isinstance(sc.environment, EnvironmentWithSun)
     np.testing.assert_allclose(sc.environment.sun.direction, [0.0, -s60, c60], atol=1e-6)
-    y, var, _ = render(tmp_path / "frame1", "backward", 100_000)
+    y, var, rendered = render(tmp_path / "frame1", "backward", 100_000)
     expected = 0.5 * 80_000.0 * math.sin(math.radians(30.0)) / math.pi
-    assert np.all(np.abs(y - expected) < z_bound(y.size) * np.sqrt(var)), (y.mean(), expected)
+    bound = t_bound(y.size, film_dof(rendered.film))
+    assert np.all(np.abs(y - expected) < bound * np.sqrt(var)), (y.mean(), expected)
     hdri = json.loads((tmp_path / "hdri_min" / "scene.json").read_text())["environment"]
     assert hdri["type"] == "hdri" and hdri["calibration"] == {"mode": "min", "value": pytest.approx(5.0)}
     assert hdri["sun"]["illuminance_lux"] == pytest.approx(80_000.0)

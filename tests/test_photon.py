@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import z_bound
+from conftest import film_dof, t_bound, welch_dof
 
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle
 from tracer.integrators import INTEGRATORS, Budget
@@ -54,7 +54,8 @@ def test_diffuse_transmitter_shows_tau_e_over_pi(tmp_path):
         world = World(load_scene(_screen(tmp_path / name, panel_radius=a, panel_height=h)))
         expected = TAU * PANEL_L * a * a / (a * a + h * h)
         m, se, res = run(world, "photon", rays, batch_size=batch, **changes)
-        assert abs(m - expected) < z_bound(2) * se and se < 0.015 * expected, (name, m, se, expected)
+        bound = t_bound(2, film_dof(res.film))
+        assert abs(m - expected) < bound * se and se < 0.015 * expected, (name, m, se, expected)
         shares = res.extra["component_shares"]
         assert shares["photon" if changes else "connection"] == pytest.approx(1.0), shares
 
@@ -74,11 +75,12 @@ def test_bias_follows_the_radius_schedule_and_falls(tmp_path):
         m, se, res = run(world, "photon", rays, next_event=False, radius_mm=8.0)
         r = radius_schedule(8.0, 2.0 / 3.0, np.arange(res.batches))
         predicted = float(np.mean(TAU / math.pi * i0 / (h * h + r * r)))
-        assert abs(m - predicted) < z_bound(4) * se, (rays, m, predicted, se)
-        out.append((m, se, exact - predicted))
-    (m1, s1, b1), (m2, s2, b2) = out
+        assert abs(m - predicted) < t_bound(4, film_dof(res.film)) * se, (rays, m, predicted, se)
+        out.append((m, se, exact - predicted, film_dof(res.film)))
+    (m1, s1, b1, f1), (m2, s2, b2, f2) = out
     assert b2 < 0.7 * b1  # the predicted bias falls ...
-    assert m2 - m1 > z_bound(4) * math.hypot(s1, s2)  # ... and the renders show it
+    bound = t_bound(4, welch_dof((s1 * s1, f1), (s2 * s2, f2)))
+    assert m2 - m1 > bound * math.hypot(s1, s2)  # ... and the renders show it
     assert exact - m2 < exact - m1
 
 
@@ -90,12 +92,12 @@ def test_no_light_path_is_counted_twice(tmp_path):
     hits) within errors, and both components are at work."""
     folder = _screen(tmp_path / "g", panel_radius=100.0, panel_height=50.0, slab=True)
     world = World(load_scene(folder))
-    ref, s_ref, _ = run(world, "backward", 3_000_000)
-    bound = z_bound(2)
+    ref, s_ref, res_ref = run(world, "backward", 3_000_000)
     # Small batches: many eye samples (two per batch), so that the connections' estimate, whose
     # distribution has a long tail under a large emitter, is measured by enough replicates.
     for changes in ({}, {"next_event": False}):
         m, se, res = run(world, "photon", 8_000_000, batch_size=8192, radius_mm=2.0, **changes)
+        bound = t_bound(2, welch_dof((se * se, film_dof(res.film)), (s_ref * s_ref, film_dof(res_ref.film))))
         assert abs(m - ref) < bound * math.hypot(se, s_ref), (changes, m, se, ref, s_ref)
         shares = res.extra["component_shares"]
         if not changes:

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import edit_json, render, z_bound
+from conftest import edit_json, film_dof, render, t_bound, z_bound
 
 import presets.analytic_disk as disk_preset
 from presets._build import SceneBuilder, frame_matrix, rectangle
@@ -23,14 +23,14 @@ def test_furnace_backward_every_pixel(preset, pupil, acc, fov):
     y, var, res = render(folder, "backward", 1_500_000)
     sigma = np.sqrt(var)
     assert np.all(3 * sigma < 0.01 * 100.0)
-    assert np.all(np.abs(y - 100.0) < z_bound(y.size) * sigma + 1e-9)
+    assert np.all(np.abs(y - 100.0) < t_bound(y.size, film_dof(res.film)) * sigma + 1e-9)
 
 
 def test_furnace_uniform_environment_backward(preset):
     folder = preset("analytic-furnace")
     edit_json(folder, lambda d: (d.update(objects=[], environment={"type": "uniform", "luminance": 42.0})))
-    y, var, _ = render(folder, "backward", 500_000)
-    assert np.all(np.abs(y - 42.0) < z_bound(y.size) * np.sqrt(var) + 1e-9)
+    y, var, res = render(folder, "backward", 500_000)
+    assert np.all(np.abs(y - 42.0) < t_bound(y.size, film_dof(res.film)) * np.sqrt(var) + 1e-9)
 
 
 def test_furnace_forward_mean(preset):
@@ -38,7 +38,7 @@ def test_furnace_forward_mean(preset):
     y, var, res = render(folder, "forward", 3_000_000)
     sem = math.sqrt(var.sum()) / y.size
     assert abs(y.mean() - 100.0) < z_bound(1) * sem and sem < 0.01 * 100 / 3
-    assert np.all(np.abs(y - 100.0) < z_bound(y.size) * np.sqrt(var))
+    assert np.all(np.abs(y - 100.0) < t_bound(y.size, film_dof(res.film)) * np.sqrt(var))
 
 
 @pytest.mark.parametrize("method,rays", [("backward", 1_500_000), ("forward", 3_000_000)])
@@ -208,8 +208,8 @@ def test_hdri_environment_calibrated_to_a_mean(tmp_path, preset):
     write_exr(folder / "sky.exr", {"R": img, "G": img, "B": img})
     edit_json(folder, lambda d: d.update(objects=[], environment={
         "type": "hdri", "file": "sky.exr", "calibration": {"mode": "mean", "value": 250.0}, "rotation_deg": 30}))
-    y, var, _ = render(folder, "backward", 300_000)
-    assert np.all(np.abs(y - 250.0) < z_bound(y.size) * np.sqrt(var) + 1e-6)
+    y, var, res = render(folder, "backward", 300_000)
+    assert np.all(np.abs(y - 250.0) < t_bound(y.size, film_dof(res.film)) * np.sqrt(var) + 1e-6)
     assert y.mean() == pytest.approx(250.0, rel=1e-3)
 
 

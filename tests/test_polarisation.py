@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import edit_json, z_bound
+from conftest import edit_json, film_dof, t_bound, z_bound
 
 from presets import PRESETS
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle
@@ -298,7 +298,7 @@ def test_every_method_sees_the_plate_reflect_each_polarisation_as_fresnel_says(t
         res = INTEGRATORS[method](w, 5, batch_size=4096 if method != "forward" else None).render(Budget(rays=rays))
         assert res.film.replicates >= 30
         m, se = float((res.film.rgb() @ Y_WEIGHTS).mean()), res.film.mean_standard_error()
-        assert abs(m - target) < z_bound(3 * 3) * max(se, 1e-3 * target), (method, m, target, se)
+        assert abs(m - target) < t_bound(3 * 3, film_dof(res.film)) * max(se, 1e-3 * target), (method, m, target, se)
 
 
 @pytest.mark.parametrize("light,ratio", [("unpolarised", None), ("s", None), ("p", None)])

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 from chi2 import ChiSquareTest
-from conftest import render, z_bound
+from conftest import film_dof, render, t_bound, z_bound
 
 from presets._build import SceneBuilder, rectangle
 from tracer.environment import (
@@ -196,7 +196,7 @@ def test_floor_lit_by_the_sun_reads_rho_e_sin_h_over_pi(tmp_path, elevation, sky
     y, var, res = render(folder, "backward", 300_000)
     expected = RHO * (E_SUN * math.sin(math.radians(elevation)) / math.pi + sky)
     sigma = np.sqrt(var)
-    assert np.all(np.abs(y - expected) < z_bound(y.size * 3) * sigma), (y.mean(), expected)
+    assert np.all(np.abs(y - expected) < t_bound(y.size * 3, film_dof(res.film)) * sigma), (y.mean(), expected)
     sem = math.sqrt(var.sum()) / y.size
     assert abs(y.mean() - expected) < z_bound(3) * sem
     # Under the sun alone the noise is the disk's cos(i) spread; a sky adds its own (sampled uniformly).
@@ -231,7 +231,7 @@ def test_a_sun_in_direct_view_shows_its_luminance_and_delivers_its_illuminance(t
     scene = load_scene(folder)
     sun = scene.environment.sun
     assert sun.luminance_cd_m2 == pytest.approx(1.488e9, rel=1e-3)
-    y, var, _ = render(folder, "backward", 400_000)
+    y, var, res = render(folder, "backward", 400_000)
     eye = ThinLensEye(scene.eye)
     # Angle of every pixel's centre from the sun's centre, and the pixel's angular half-diagonal.
     sx, sy = eye.pixel_centers()
@@ -242,7 +242,7 @@ def test_a_sun_in_direct_view_shows_its_luminance_and_delivers_its_illuminance(t
     inside, outside = angle + half_diagonal < delta, angle - half_diagonal > delta
     assert inside.sum() > 200 and outside.sum() > 500
     sigma = np.sqrt(var)
-    assert np.all(np.abs(y[inside] - sun.luminance_cd_m2) < z_bound(inside.sum()) * sigma[inside]
+    assert np.all(np.abs(y[inside] - sun.luminance_cd_m2) < t_bound(inside.sum(), film_dof(res.film)) * sigma[inside]
                   + 1e-6 * sun.luminance_cd_m2)
     assert np.all(y[outside] == 0.0)
     g = eye.extent.reshape(y.shape)

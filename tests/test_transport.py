@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import edit_json, z_bound
+from conftest import edit_json, film_dof, t_bound, welch_dof, z_bound
 
 from presets import PRESETS, SINGLE_METHOD
 from presets._build import SceneBuilder, box, frame_matrix, rectangle
@@ -34,6 +34,12 @@ def run(world, variant, rays, seed, reference=None):
 def region_mean(y, var, mask):
     k = int(mask.sum())
     return float(y[mask].mean()), math.sqrt(float(var[mask].sum())) / k
+
+
+def region_dof(var, mask, res):
+    """Degrees of freedom of a region mean's variance: a sum of its pixels' variances, each from the
+    spread of the film's replicates (Welch-Satterthwaite)."""
+    return welch_dof((var[mask], film_dof(res.film)))
 
 
 # -- a closed form --------------------------------------------------------------------------------
@@ -88,13 +94,13 @@ def test_forward_and_backward_with_and_without_nee_agree(tmp_path, name):
     out = {v: run(world, v, RAYS[name], seed=21) for v in VARIANTS}
     y_ref = out["backward"][0]
     bright = y_ref > 0.1 * np.percentile(y_ref, 99)
-    bound = z_bound(len(RAYS) * 2 * 3)
     for mask in (np.ones(y_ref.shape, bool), bright):
-        stats = {v: region_mean(y, var, mask) for v, (y, var, _) in out.items()}
+        stats = {v: (*region_mean(y, var, mask), region_dof(var, mask, res)) for v, (y, var, res) in out.items()}
         names = list(stats)
         for i in range(3):
             for j in range(i + 1, 3):
-                (a, sa), (b, sb) = stats[names[i]], stats[names[j]]
+                (a, sa, fa), (b, sb, fb) = stats[names[i]], stats[names[j]]
+                bound = t_bound(len(RAYS) * 2 * 3, welch_dof((sa * sa, fa), (sb * sb, fb)))
                 assert abs(a - b) < bound * math.hypot(sa, sb), (name, names[i], names[j], a, b, sa, sb)
 
 
@@ -110,11 +116,13 @@ def test_photon_and_forward_agree_on_screen_presets(tmp_path, name):
     forward_rays = 30_000_000 if name == "hud-direct-condenser" else 12_000_000
     for method, rays in (("photon", 6_000_000), ("forward", forward_rays)):
         res = INTEGRATORS[method](world, 5).render(Budget(rays=rays))
-        means[method] = (float((res.film.rgb() @ Y_WEIGHTS).mean()), res.film.mean_standard_error())
+        means[method] = (float((res.film.rgb() @ Y_WEIGHTS).mean()), res.film.mean_standard_error(),
+                         film_dof(res.film))
         if method == "photon":
             assert res.extra["component_shares"]["photon"] > 0.99
-    (a, sa), (b, sb) = means["photon"], means["forward"]
-    assert abs(a - b) < z_bound(len(PHOTON_PRESETS)) * math.hypot(sa, sb) and max(sa / a, sb / b) < 0.08, means
+    (a, sa, fa), (b, sb, fb) = means["photon"], means["forward"]
+    bound = t_bound(len(PHOTON_PRESETS), welch_dof((sa * sa, fa), (sb * sb, fb)))
+    assert abs(a - b) < bound * math.hypot(sa, sb) and max(sa / a, sb / b) < 0.08, means
 
 
 def test_nee_report_gives_the_share_of_connections(tmp_path):
