@@ -53,6 +53,19 @@ VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
             "backward, no NEE": ("backward", {"next_event": False}), "photon": ("photon", {})}
 
 
+#: The transport core's goal for one process: this share of the raw Embree rate, end to end (issue 8).
+GOAL = 0.3
+
+
+def speedup_needed(rate: float, raw: float, own: float, goal: float = GOAL) -> float:
+    """How many times as fast everything but Embree must become for a method that traces ``rate``
+    rays/s end to end, whose own rays Embree alone traces at ``own`` rays/s, to reach ``goal`` x
+    ``raw`` rays/s (per ray: 1/rate = 1/own + the rest); inf where Embree alone is slower than that."""
+    rest_now = 1.0 / rate - 1.0 / own
+    rest_goal = 1.0 / (goal * raw) - 1.0 / own
+    return max(rest_now, 0.0) / rest_goal if rest_goal > 0 else float("inf")
+
+
 #: Paths per batch of the measured renders: the command line's batch for a budget in rays (None: sized
 #: from the pilot to 2 % of the time budget, as --seconds does; --batch-size auto).
 BATCH = DEFAULT_BATCH
@@ -187,6 +200,8 @@ def main():
             share = {k: float(np.median([s.get(k, 0.0) for s in stages])) for k in stages[0]}
             print(f"{label:16s} end to end (median): {rate:,.0f} rays/s = {rate / raw:.2f} of raw, {rate / own:.2f} "
                   f"of raw on its own rays")
+            print(f"{label:16s} Embree alone traces its own rays at {own / raw:.2f} of raw; {GOAL} of raw needs "
+                  f"everything else {speedup_needed(rate, raw, own):.2f} x as fast")
             print(f"{label:16s} on {args.workers} processes (median): {par_rate:,.0f} rays/s = {par_rate / rate:.2f} x "
                   f"one process; steady (without the first batch) {par_steady / steady:.2f} x; start-up "
                   f"{np.median(startup):.1f} s, not in the rate; workers busy {np.median(busy):.3f} of the time, "
