@@ -242,6 +242,32 @@ def test_6_to_17_bad_values_give_one_line_naming_file_and_field(mirror, earlier,
     assert hashes(out) == before
 
 
+
+_PLY_HEADER = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+               "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n")
+#: Mesh files that trimesh reads without complaint (a PLY face beyond its vertices, vertices of two
+#: coordinates) or with an exception of its own (an OBJ face beyond its vertices): file, text, words.
+BAD_MESHES = {
+    "OBJ vertices of two coordinates": ("mirror.obj", "v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n", "three coordinates"),
+    "OBJ face beyond the vertices": ("mirror.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n",
+                                     "a face refers to a vertex the file does not have"),
+    "PLY face beyond the vertices": ("bad.ply", _PLY_HEADER + "3 0 1 5\n", "triangles of the file's 3 vertices"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_MESHES))
+def test_malformed_mesh_files_give_one_line_naming_file_and_field(mirror, earlier, case):
+    """A mesh file that parses but does not hold triangles of three-coordinate vertices is refused
+    before the first ray: exit 2, one line naming scene.json, the field and the mesh file, the earlier
+    outputs untouched (before, a traceback from deep in the loader)."""
+    out, before = earlier
+    name, text, words = BAD_MESHES[case]
+    (mirror / "meshes" / name).write_text(text)
+    edit_json(mirror, lambda d: d["objects"][0].update(mesh=f"meshes/{name}"))
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", "objects[0].mesh", f"meshes/{name}", words)
+    assert hashes(out) == before
+
 def test_9_the_memory_message_gives_the_limit_and_the_estimate(mirror):
     edit_json(mirror, _set(("eye", "resolution"), [16384, 16384]))
     code, err = run_cli("render", mirror, "--rays", 1000, "--workers", 1, "--quiet", "--out", mirror / "o")

@@ -377,12 +377,19 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
                 loaded = meshes[0]
     except SceneError:
         raise
+    except IndexError as e:  # trimesh indexing its vertices with a face's
+        ck.fail(fld, f"cannot read mesh {rel}: a face refers to a vertex the file does not have ({e})")
     except Exception as e:  # trimesh raises many types on malformed files
         ck.fail(fld, f"cannot read mesh {rel}: {e}")
     v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
     if len(v) == 0 or len(f) == 0:
         ck.fail(fld, f"{rel} contains no triangles")
+    if v.ndim != 2 or v.shape[1] != 3:
+        ck.fail(fld, f"{rel}: every vertex needs three coordinates (x y z), the file gives "
+                     f"{v.shape[1] if v.ndim == 2 else 0}")
+    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
+        ck.fail(fld, f"{rel}: its faces must be triangles of the file's {len(v)} vertices")
     if not np.all(np.isfinite(v)):
         ck.fail(fld, f"{rel} has non-finite vertex coordinates")
     uv = None
