@@ -329,6 +329,24 @@ def test_8_bad_arguments_give_one_line_naming_the_argument(mirror, earlier, case
     assert hashes(out) == before
 
 
+def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_warned(mirror, earlier, monkeypatch):
+    """Each worker holds the tracer, the scene and its own film: --workers 1000 spawned a thousand
+    processes (about 130 MiB each) on a 24 GiB machine. Workers whose memory together passes half of
+    the machine's are refused in one line naming --workers, the estimate and how many fit, before any
+    process starts; workers beyond the CPUs render with a warning. Here on a machine of 1 GiB: 8
+    workers of analytic-mirror at 16 x 12 pixels (about 128 MiB each) need 1.0 GiB."""
+    import tracer.validate
+
+    out, before = earlier
+    monkeypatch.setattr(tracer.validate, "physical_memory_bytes", lambda: 1 << 30)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "--workers", "8 processes need about 1.0 GiB", "16 x 12", "at most 3 here")
+    assert hashes(out) == before
+    cpus = cli.available_cpus()
+    assert cli.check_workers(cpus, (16, 12)) is None
+    assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
+
+
 def test_10_an_unreadable_scene_or_meshes_folder_names_the_file(mirror, earlier, monkeypatch):
     """Finding 10: PermissionError tracebacks. (Permissions are simulated: the tests may run as root,
     who reads everything.)"""

@@ -34,6 +34,7 @@ Ctrl-C (nothing written).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import shutil
@@ -125,6 +126,37 @@ def check_render_args(args):
         bad("--workers", f"must lie in [1, {MAX_WORKERS}], got {args.workers}")
 
 
+def available_cpus() -> int:
+    """CPUs this process may run on (its affinity where the system says, else the machine's count): the
+    default number of workers."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
+def check_workers(workers: int, resolution: tuple[int, int]) -> str | None:
+    """Worker processes the machine can hold, once the scene's ``resolution`` (retina pixels, the
+    largest of a sweep's runs) is known: each holds the tracer, the scene and a film of its own, so
+    together they must stay within half of the machine's memory (the rule of eye.resolution), or
+    :class:`ArgumentError`. Returns a warning where there are more workers than CPUs (they share
+    them: more start-up time and memory, no more speed), else None."""
+    from .validate import BYTES_PER_PIXEL, PROCESS_BASE_BYTES, physical_memory_bytes
+
+    w, h = resolution
+    each = PROCESS_BASE_BYTES + w * h * BYTES_PER_PIXEL
+    memory = physical_memory_bytes()
+    if workers > 1 and memory is not None and workers * each > memory / 2:
+        raise ArgumentError(f"--workers: {workers} processes need about {workers * each / 2**30:.1f} GiB (each holds "
+                            f"the tracer, the scene and a film of {w} x {h} pixels: about {each / 2**20:.0f} MiB); "
+                            f"this machine has {memory / 2**30:.1f} GiB (the limit is half of it): at most "
+                            f"{max(1, int(memory / 2 // each))} here")
+    cpus = available_cpus()
+    if workers > cpus:
+        return (f"--workers {workers} on {cpus} CPUs: processes beyond the CPUs share them (more start-up time and "
+                f"memory, no more speed)")
+    return None
+
+
 def _resolve_scene(arg: str, tmp: Path) -> Path:
     """A scene folder as given, or a preset name exported into ``tmp``."""
     from presets import PRESETS
@@ -180,6 +212,9 @@ def cmd_render(args) -> int:
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
+            crowded = check_workers(args.workers, scene.eye.resolution)
+            if crowded:
+                print(f"warning: {crowded}", file=sys.stderr)
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
                                           should_stop=flag, batch_size=args.batch_size, workers=args.workers,
                                           analyse=not args.no_analysis)
@@ -421,6 +456,10 @@ def cmd_sweep(args) -> int:
             try:
                 plan = plan_sweep(scene_dir, fields, requirements, tempfile.mkdtemp(dir=tmp), args.x, args.y,
                                   progress=checking)
+                crowded = check_workers(args.workers, max((json.loads(plan.scene_text(k))["eye"]["resolution"]
+                                                           for k in range(len(plan.grid))), key=math.prod))
+                if crowded:
+                    print(f"warning: {crowded}", file=sys.stderr)
                 previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
                 try:
                     result = run_sweep(plan, args.method, budget, args.seed, outputs, workers=args.workers,
@@ -471,7 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--batch-size", type=int, default=None,
                    help="paths per batch, 1024 to 2^24 (default: 131072 with --rays; with --seconds sized so that a "
                         "batch takes about 2 %% of the budget)")
-    r.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    r.add_argument("--workers", type=int, default=available_cpus(),
                    help="processes (default: one per core); with --rays the image does not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--no-analysis", action="store_true",
@@ -534,7 +573,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--rays", type=int, help="budget of each run in traced ray segments")
     b.add_argument("--seconds", type=float, help="budget of each run in wall-clock seconds")
     w.add_argument("--seed", type=int, default=0, help="the seed of every run (default 0)")
-    w.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    w.add_argument("--workers", type=int, default=available_cpus(),
                    help="processes per run (default: one per core)")
     w.add_argument("--batch-size", type=int, default=None, help="paths per batch, as for render")
     w.add_argument("--out", required=True, help="output folder (runs/<k>/, sweep.csv, sweep.json, sweep.png)")
@@ -555,7 +594,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except SceneError as e:
+    except (SceneError, ArgumentError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
 
