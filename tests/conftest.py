@@ -35,7 +35,7 @@ def z_bound(m: int, alpha: float = 0.01) -> float:
 
 def _betacf(a: float, b: float, x: float) -> float:
     """The continued fraction of the regularised incomplete beta function, by the modified Lentz
-    method (Press et al., Numerical Recipes, 3rd ed., sec. 6.4)."""
+    method (Press et al., Numerical Recipes in C, 2nd ed., sec. 6.4)."""
     tiny = 1e-300
     c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
     d = 1.0 / (d if abs(d) > tiny else tiny)
@@ -70,7 +70,7 @@ def t_bound(m: int, dof: float, alpha: float = 0.01) -> float:
     would reject a true hypothesis several times as often as alpha says (tests/test_statistics.py).
 
     The two-sided tail of T with nu degrees of freedom beyond t is I_x(nu/2, 1/2), x = nu / (nu + t^2)
-    (Abramowitz & Stegun 26.7.1 and 26.5.27), increasing in x: solved by bisection."""
+    (Numerical Recipes in C, 2nd ed., eq. 6.4.9), increasing in x: solved by bisection."""
     if dof < 1:
         raise ValueError(f"a Student-t bound needs at least one degree of freedom, got {dof}")
     if math.isinf(dof):
