@@ -342,9 +342,16 @@ def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_w
     code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
     assert_one_line_error(code, err, "--workers", "8 processes need about 1.0 GiB", "16 x 12", "at most 3 here")
     assert hashes(out) == before
-    cpus = cli.available_cpus()
+    cpus = tracer.validate.available_cpus()
     assert cli.check_workers(cpus, (16, 12)) is None
     assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
+    # The library refuses them too, before its pilot and any worker process.
+    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    with pytest.raises(tracer.validate.WorkersError, match="at most 3 here"):
+        render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=10**12), workers=8)
 
 
 def test_10_an_unreadable_scene_or_meshes_folder_names_the_file(mirror, earlier, monkeypatch):

@@ -126,35 +126,15 @@ def check_render_args(args):
         bad("--workers", f"must lie in [1, {MAX_WORKERS}], got {args.workers}")
 
 
-def available_cpus() -> int:
-    """CPUs this process may run on (its affinity where the system says, else the machine's count): the
-    default number of workers."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return os.cpu_count() or 1
-
-
 def check_workers(workers: int, resolution: tuple[int, int]) -> str | None:
-    """Worker processes the machine can hold, once the scene's ``resolution`` (retina pixels, the
-    largest of a sweep's runs) is known: each holds the tracer, the scene and a film of its own, so
-    together they must stay within half of the machine's memory (the rule of eye.resolution), or
-    :class:`ArgumentError`. Returns a warning where there are more workers than CPUs (they share
-    them: more start-up time and memory, no more speed), else None."""
-    from .validate import BYTES_PER_PIXEL, PROCESS_BASE_BYTES, physical_memory_bytes
+    """:func:`tracer.validate.check_workers`, its refusal as an :class:`ArgumentError` of --workers."""
+    from .validate import WorkersError
+    from .validate import check_workers as check
 
-    w, h = resolution
-    each = PROCESS_BASE_BYTES + w * h * BYTES_PER_PIXEL
-    memory = physical_memory_bytes()
-    if workers > 1 and memory is not None and workers * each > memory / 2:
-        raise ArgumentError(f"--workers: {workers} processes need about {workers * each / 2**30:.1f} GiB (each holds "
-                            f"the tracer, the scene and a film of {w} x {h} pixels: about {each / 2**20:.0f} MiB); "
-                            f"this machine has {memory / 2**30:.1f} GiB (the limit is half of it): at most "
-                            f"{max(1, int(memory / 2 // each))} here")
-    cpus = available_cpus()
-    if workers > cpus:
-        return (f"--workers {workers} on {cpus} CPUs: processes beyond the CPUs share them (more start-up time and "
-                f"memory, no more speed)")
-    return None
+    try:
+        return check(workers, resolution)
+    except WorkersError as e:
+        raise ArgumentError(f"--workers: {e}") from None
 
 
 def _resolve_scene(arg: str, tmp: Path) -> Path:
@@ -495,6 +475,7 @@ class Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from .integrators import DEFAULT_METHOD, INTEGRATORS
+    from .validate import available_cpus
 
     ap = Parser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
     sub = ap.add_subparsers(dest="command", required=True)

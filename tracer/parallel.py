@@ -44,6 +44,7 @@ from .eye import ThinLensEye
 from .integrators import INTEGRATORS, Budget, RenderResult
 from .integrators.base import drive
 from .scene import EyeSpec, load_scene
+from .validate import check_workers
 from .world import World
 
 _WORKER: dict = {}
@@ -205,7 +206,10 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
                     preview=None) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
     folder, method, seed and batch size; see the module docstring). Raises RuntimeError when no
-    Python interpreter for the workers is found (:func:`python_executable`)."""
+    Python interpreter for the workers is found (:func:`python_executable`), and
+    :class:`tracer.validate.WorkersError` when the machine's memory does not hold ``workers``
+    processes."""
+    check_workers(workers, local.scene.eye.resolution)  # WorkersError before the pilot and any process
     started = time.perf_counter()  # a time budget counts the pilot and the workers' start-up
     budget = local.prepare(budget)  # before the workers take the batch size and the options
     executable = python_executable()

@@ -1,4 +1,5 @@
-"""Validation of JSON fields for the scene format: one checker for every block of scene.json.
+"""Validation of JSON fields for the scene format: one checker for every block of scene.json; and of
+what a render asks of the machine (memory for its film, worker processes).
 
 Every number has a physical range. Beyond it a value cannot describe a HUD, an eye or their
 surroundings, and arithmetic would overflow (images are float32, up to 3.4e38; a luminance squared
@@ -51,6 +52,39 @@ def physical_memory_bytes() -> int | None:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, OSError, ValueError):
         return None
+
+
+def available_cpus() -> int:
+    """CPUs this process may run on (its affinity where the system says, else the machine's count): the
+    default number of worker processes."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
+class WorkersError(ValueError):
+    """More worker processes than the machine's memory holds (the message says how many fit)."""
+
+
+def check_workers(workers: int, resolution: tuple[int, int]) -> str | None:
+    """Worker processes the machine can hold for a render of ``resolution`` (retina pixels; the largest
+    of a sweep's runs): each holds the tracer, the scene and a film of its own, so together they must
+    stay within half of the machine's memory (the rule of eye.resolution), or :class:`WorkersError`.
+    Returns a warning where there are more workers than CPUs (they share them: more start-up time
+    and memory, no more speed), else None."""
+    w, h = resolution
+    each = PROCESS_BASE_BYTES + w * h * BYTES_PER_PIXEL
+    memory = physical_memory_bytes()
+    if workers > 1 and memory is not None and workers * each > memory / 2:
+        raise WorkersError(f"{workers} processes need about {workers * each / 2**30:.1f} GiB (each holds the tracer, "
+                           f"the scene and a film of {w} x {h} pixels: about {each / 2**20:.0f} MiB); this machine "
+                           f"has {memory / 2**30:.1f} GiB (the limit is half of it): at most "
+                           f"{max(1, int(memory / 2 // each))} here")
+    cpus = available_cpus()
+    if workers > cpus:
+        return (f"--workers {workers} on {cpus} CPUs: processes beyond the CPUs share them (more start-up time and "
+                f"memory, no more speed)")
+    return None
 
 
 def _read_json_object(pairs):
