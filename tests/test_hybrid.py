@@ -117,6 +117,21 @@ def test_channels_and_methods_that_the_scene_does_not_need_are_skipped_with_the_
     assert "photons leave the scene's emitters only" in why["photon"]
 
 
+def test_a_channel_whose_pilots_find_no_light_is_skipped_with_a_warning_that_says_so(preset):
+    """analytic-mirror with the eye turned away from its panel and mirror: the HUD channel's pilots
+    (backward, forward) find no light, the channel is skipped and the rest of the budget not spent; the
+    warnings say so (the pilots' paths with it), not only that the render traced no path."""
+    folder = preset("analytic-mirror")
+    edit_json(folder, lambda d: d["eye"].update(gaze=[0.0, -1.0, 0.0]))
+    res = INTEGRATORS["hybrid"](load_scene(folder), 1).render(Budget(rays=300_000))
+    hud = res.extra["channels"]["hud"]
+    assert hud["method"] is None and hud["skipped"].startswith("no pilot found light")
+    assert sum(p["paths"] for p in hud["pilots"]) > 0 and res.paths == 0
+    said = "hud channel skipped: no pilot found light (backward: "
+    assert any(w.startswith(said) for w in res.warnings), res.warnings
+    assert not any("environment channel skipped" in w for w in res.warnings)  # skipped by the scene, not by pilots
+    assert luminance(res.film.rgb()).max() == 0.0
+
 def _efficiency_of(method: str, folder, seed: int, rays: int) -> tuple[float, np.ndarray, np.ndarray]:
     res = INTEGRATORS[method](load_scene(folder), seed).render(Budget(rays=rays))
     return res.rays, luminance(res.film.rgb()), res.film.variance_y()

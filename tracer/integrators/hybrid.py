@@ -442,6 +442,8 @@ class _Channels(Integrator):
                                     "mean_standard_error_cd_m2": film.mean_standard_error(c.group),
                                     "warnings": list(c.integrator.warnings)}
                 result.warnings += [f"{c.name} channel: {w}" for w in c.integrator.warnings]
+            elif c.skipped is not None and any(p.paths for p in c.pilots):  # its pilots ran and found nothing
+                result.warnings.append(f"{c.name} channel skipped: {c.skipped}")
             channels[c.name] = entry
         extra["channels"] = channels
         super().finish(result)
