@@ -175,6 +175,25 @@ def test_stability_where_the_method_cannot_work(tmp_path):
     assert res.extra["photon"]["final_radius_mm"] > 0
 
 
+def test_paths_cut_at_max_depth_are_named_as_the_cause(tmp_path):
+    """hud-direct with methods.photon.max_depth = 3: no eye path gets past the windshield and mirror to
+    the scatterer. The warnings name max_depth as the cause (the photon method has no probe of the cut
+    paths' light), not the scene (\"use the forward or backward method\"); at the default depth
+    nothing is cut and nothing is said."""
+    from presets import PRESETS
+
+    folder = PRESETS["hud-direct"].write(tmp_path / "s", resolution=(32, 16))
+    scene = load_scene(folder)
+    options = dict(scene.method_options("photon")) | {"max_depth": 3}
+    shallow = INTEGRATORS["photon"](scene, 1, options=options).render(Budget(rays=400_000))
+    said = " ".join(shallow.warnings)
+    assert "photon paths were cut at methods.photon.max_depth = 3" in said and "raise max_depth" in said, said
+    assert "the eye paths were cut at methods.photon.max_depth = 3 before any reached one" in said, said
+    assert "use the forward or backward method" not in said
+    deep = INTEGRATORS["photon"](load_scene(folder), 1).render(Budget(rays=400_000))
+    assert deep.extra["photon"]["eye_paths_cut_at_max_depth"] == 0 and not any("cut" in w for w in deep.warnings)
+
+
 def test_batches_merge_exactly_across_processes(tmp_path):
     """Batches are independent replicates addressed by seed: two worker processes give the image of one
     process bit for bit."""

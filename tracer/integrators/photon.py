@@ -76,6 +76,9 @@ FOOTPRINT_PIXELS = 1 << 14
 #: The radius never falls below this fraction of r_0 (a guard; the schedule reaches it only after
 #: about 10^18 batches).
 MIN_RADIUS_FRACTION = 1e-3
+#: Paths cut at max_depth are warned of above this share of the eye samples or of the photons (the
+#: photon method has no probe of the light they carry, unlike forward and backward tracing).
+CUT_WARN_SHARE = 1e-3
 #: The ctx.store keys of the photon figures (summed over batches).
 STORE_KEYS = ("photons_emitted", "photons_stored", "visibility_points", "photons_gathered", "photon_paths_cut")
 
@@ -456,11 +459,20 @@ class PhotonTracer(BackwardTracer):
         total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)
         result.extra["component_shares"] = {
             c: (float(luminance3(film.sums[c]).sum()) / total if total > 0 else 0.0) for c in self.components}
+        cut_eye, cut_photons, emitted = int(self.truncated), figures["photon_paths_cut"], figures["photons_emitted"]
+        if cut_eye > CUT_WARN_SHARE * max(result.paths, 1) or cut_photons > CUT_WARN_SHARE * max(emitted, 1):
+            result.warnings.append(
+                f"{cut_eye:,} eye paths (from {result.paths:,} samples, split at glass) and {cut_photons:,} of "
+                f"{emitted:,} photon paths were cut at methods.photon.max_depth = {self.max_depth}: the light they "
+                "would carry is missing from the image (the photon method does not measure how much): raise max_depth")
         if vis == 0 and result.paths:
+            why = (f"the eye paths were cut at methods.photon.max_depth = {self.max_depth} before any reached one: "
+                   "raise it" if cut_eye else
+                   "the image holds only the sources and environment seen through specular optics: use the forward "
+                   "or backward method")
             result.warnings.append(
                 f"no eye path reached a scattering (non-specular) surface in {result.paths:,} samples: the photon maps "
-                f"were never used (efficiency {result.efficiency:.3g}); the image holds only the sources and "
-                "environment seen through specular optics: use the forward or backward method")
+                f"were never used (efficiency {result.efficiency:.3g}); {why}")
         elif figures["photons_stored"] == 0 and result.paths:
             result.warnings.append(
                 f"no photon reached a scattering surface ({figures['photons_emitted']:,} emitted): only direct light "
