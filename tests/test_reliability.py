@@ -250,7 +250,7 @@ _PLY_HEADER = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nprope
 BAD_MESHES = {
     "OBJ vertices of two coordinates": ("mirror.obj", "v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n", "three coordinates"),
     "OBJ face beyond the vertices": ("mirror.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n",
-                                     "a face refers to a vertex the file does not have"),
+                                     "a face refers to vertex 7, but the file has 3 vertices"),
     "PLY face beyond the vertices": ("bad.ply", _PLY_HEADER + "3 0 1 5\n", "triangles of the file's 3 vertices"),
 }
 

@@ -61,6 +61,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -377,7 +378,11 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
                 loaded = meshes[0]
     except SceneError:
         raise
-    except IndexError as e:  # trimesh indexing its vertices with a face's
+    except IndexError as e:  # trimesh indexing its vertices with a face's (0-based; an OBJ counts from 1)
+        found = re.search(r"index (-?\d+) is out of bounds for axis 0 with size (\d+)", str(e))
+        if found and int(found[1]) >= 0 and path.suffix.lower() == ".obj":
+            index, size = int(found[1]) + 1, int(found[2])
+            ck.fail(fld, f"cannot read mesh {rel}: a face refers to vertex {index}, but the file has {size} vertices")
         ck.fail(fld, f"cannot read mesh {rel}: a face refers to a vertex the file does not have ({e})")
     except Exception as e:  # trimesh raises many types on malformed files
         ck.fail(fld, f"cannot read mesh {rel}: {e}")
