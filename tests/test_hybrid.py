@@ -25,28 +25,26 @@ def _sky(folder, cd_m2: float = 1000.0):
     edit_json(folder, lambda d: d.update(environment={"type": "uniform", "luminance": cd_m2}))
 
 
+def _block_pixels(a: np.ndarray, shape=(4, 8)) -> np.ndarray:
+    """The pixels of ``a`` (H, W) as (blocks, pixels per block), the blocks of a shape[0] x shape[1] grid
+    in row-major order (the rows and columns left over by the grid are dropped)."""
+    h, w = a.shape
+    by, bx = h // shape[0], w // shape[1]
+    return a[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx).transpose(0, 2, 1, 3) \
+        .reshape(shape[0] * shape[1], by * bx)
+
+
 def _blocks(y: np.ndarray, var: np.ndarray, shape=(4, 8)):
     """Means of Y over a grid of blocks and their standard errors (independent pixels)."""
-    h, w = y.shape
-    by, bx = h // shape[0], w // shape[1]
-    yb = y[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx)
-    vb = var[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx)
-    n = by * bx
-    return yb.mean(axis=(1, 3)).ravel(), np.sqrt(vb.sum(axis=(1, 3)).ravel()) / n
+    yb, vb = _block_pixels(y, shape), _block_pixels(var, shape)
+    return yb.mean(axis=1), np.sqrt(vb.sum(axis=1)) / yb.shape[1]
 
 
 def _block_dof(parts, shape=(4, 8)):
     """Welch-Satterthwaite degrees of freedom of each block's variance (the blocks of :func:`_blocks`),
     a sum of independent per-pixel variances given as (var (H, W), its degrees of freedom) parts."""
-    h, w = parts[0][0].shape
-    by, bx = h // shape[0], w // shape[1]
-
-    def blocks(v):
-        return v[: by * shape[0], : bx * shape[1]].reshape(shape[0], by, shape[1], bx).transpose(0, 2, 1, 3) \
-            .reshape(shape[0] * shape[1], by * bx)
-
-    split = [(blocks(v), dof) for v, dof in parts]
-    return np.array([welch_dof(*((b[k], dof) for b, dof in split)) for k in range(shape[0] * shape[1])])
+    split = [(_block_pixels(v, shape), dof) for v, dof in parts]
+    return np.array([welch_dof(*((b[k], dof) for b, dof in split)) for k in range(len(split[0][0]))])
 
 
 def test_hybrid_is_the_sum_of_its_channels_and_agrees_with_backward(preset):

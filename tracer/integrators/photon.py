@@ -475,5 +475,5 @@ class PhotonTracer(BackwardTracer):
                 f"were never used (efficiency {result.efficiency:.3g}); {why}")
         elif figures["photons_stored"] == 0 and result.paths:
             result.warnings.append(
-                f"no photon reached a scattering surface ({figures['photons_emitted']:,} emitted): only direct light "
+                f"no photon reached a scattering surface ({emitted:,} emitted): only direct light "
                 "(connections) lights the surfaces in view")
