@@ -42,7 +42,7 @@ MAX_PIXELS = 1 << 24
 BYTES_PER_PIXEL = 800
 #: Memory a render's process takes besides its film, bytes: the interpreter, numpy, Embree, the tracer,
 #: the scene and a bounce's arrays (peaks less the film, `/usr/bin/time -v hud-trace render PRESET
-#: --method backward --rays 3000000 --workers 1`: 110 MiB on analytic-mirror, 190 MiB on hud-direct
+#: --method backward --rays 3000000 --workers 1`: 115 MiB on analytic-mirror, 195 MiB on hud-direct
 #: with next-event estimation); a worker process holds as much again.
 PROCESS_BASE_BYTES = 128 << 20
 
