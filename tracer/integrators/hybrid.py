@@ -13,12 +13,19 @@ that is unbiased (or consistent, the photon method) for it.
 
 Choice. For a channel whose method is "auto", every method that applies to it runs a short pilot
 (a share ``pilot_share`` of the budget, split between them) on a stream of its own, and is scored by
-its efficiency 1 / (V x cost): V the median, over the pixels some pilot lit, of the relative variance
-of a pixel's estimate (from the pilot's replicates; a pixel that the method left dark counts as
-infinitely noisy), cost the pilot's seconds (a budget in seconds) or ray segments (a budget in rays,
-which also makes the choice reproducible). The most efficient method renders the channel with the
-rest of the budget; the pilots are reported, not merged into the image. The variance of a pixel
-falls as 1 / N for every method here, so V x cost does not depend on the pilot's length.
+its efficiency 1 / (V x cost), cost the pilot's seconds (a budget in seconds) or ray segments (a
+budget in rays, which also makes the choice reproducible). V is the larger of two medians of a pixel's
+relative variance (from the pilot's replicates; a pixel that the method left dark counts as infinitely
+noisy): over the pixels some pilot lit (the typical pixel: on a HUD, mostly the background), and over
+the bright region (pixels above a tenth of the 99th percentile of the pilots' images combined with
+inverse-variance weights, as benchmarks/convergence.py defines it on its reference: the symbols, a
+focused spot). Either alone misleads: the median of the lit pixels passes a method that fails on a
+bright feature covering a few per cent of the image (backward tracing of a spot that a lens focuses
+from a small LED, beside a surface the LED lights directly, reaches the spot only by chance), and the
+bright region alone passes one that leaves the background noisy. The most efficient method renders
+the channel with the rest of the budget; the pilots are reported, not merged into the image. The
+variance of a pixel falls as 1 / N for every method here, so V x cost does not depend on the pilot's
+length.
 
 What applies (model no more than the scene needs; the report says what was skipped and why):
 
@@ -95,7 +102,10 @@ class Pilot:
     batch_size: int = 0
     replicates: int = 0
     cost: float = 0.0
+    #: The medians of a pixel's relative variance over the lit pixels and over the bright region
+    #: (:func:`relative_variances`); V is the larger.
     median_relative_variance: float | None = None
+    bright_median_relative_variance: float | None = None
     efficiency: float = 0.0
     #: The method's units of work in the pilot (paths of a backward batch, else its batch size: particles
     #: or photons) and, summed over the pixels, its image's variance (cd/m^2)^2 times those units: what
@@ -109,10 +119,14 @@ class Pilot:
         """The pilot for the report (JSON: an infinite V, where the pilot left most lit pixels dark, is
         given as null with a note)."""
         out = {k: v for k, v in asdict(self).items() if k not in ("image", "variance")}
-        v = self.median_relative_variance
-        if v is not None and not math.isfinite(v):
-            out["median_relative_variance"] = None
-            out["note"] = "most of the pixels that some pilot lit stayed dark in this one: efficiency 0"
+        notes = {"median_relative_variance": "most of the pixels that some pilot lit stayed dark in this one",
+                 "bright_median_relative_variance": "most of the bright region stayed dark in this one"}
+        dark = [why for key, why in notes.items() if out[key] is not None and not math.isfinite(out[key])]
+        for key in notes:
+            if out[key] is not None and not math.isfinite(out[key]):
+                out[key] = None
+        if dark:
+            out["note"] = "; ".join(dark) + ": efficiency 0"
         return out
 
 
@@ -164,19 +178,46 @@ def applicable(world, lights: bool, environment: bool) -> dict[str, str | None]:
     return out
 
 
-def median_relative_variance(images: list[np.ndarray], variances: list[np.ndarray], k: int) -> float | None:
-    """V of pilot ``k`` (module docstring): the median over the pixels any pilot lit of var / mean^2, a
-    pixel that pilot ``k`` left dark counted as infinite; None where no pilot lit anything."""
+#: The bright region: pixels above this share of the 99th percentile of the pilots' combined image
+#: (benchmarks/convergence.py's bright_region on its reference).
+BRIGHT_SHARE, BRIGHT_PERCENTILE = 0.1, 99.0
+
+
+def combined_image(images: list[np.ndarray], variances: list[np.ndarray]) -> np.ndarray:
+    """The pilots' luminance images (cd/m^2) combined per pixel with inverse-variance weights, each
+    pilot counted only where it lit the pixel (a dark pixel says nothing of its luminance); a pilot
+    whose estimate there has no spread (every replicate the same) weighs as if its relative variance
+    were 1e-12."""
+    num = np.zeros(images[0].shape)
+    den = np.zeros(images[0].shape)
+    for y, var in zip(images, variances, strict=True):
+        w = np.zeros(y.shape)
+        np.divide(1.0, np.maximum(var, 1e-12 * y * y), out=w, where=y > 0)
+        num += w * y
+        den += w
+    out = np.zeros(images[0].shape)
+    np.divide(num, den, out=out, where=den > 0)
+    return out
+
+
+def relative_variances(images: list[np.ndarray], variances: list[np.ndarray], k: int) -> tuple[float, float] | None:
+    """The two medians of var / mean^2 of pilot ``k`` (module docstring), a pixel that pilot ``k`` left
+    dark counted as infinite: over the pixels any pilot lit, and over the bright region of the pilots'
+    :func:`combined_image`. None where no pilot lit anything. V, the figure the efficiency divides by,
+    is the larger."""
     brightest = max((float(y.max()) for y in images), default=0.0)
     if brightest <= 0:
         return None
     lit = np.zeros(images[0].shape, bool)
     for y in images:
         lit |= y > LIT_SHARE * brightest
-    y, var = images[k][lit], variances[k][lit]
+    y, var = images[k], variances[k]
     rel = np.full(y.shape, np.inf)
     np.divide(var, y * y, out=rel, where=y > 0)
-    return float(np.median(rel))
+    both = combined_image(images, variances)
+    bright = lit & (both > BRIGHT_SHARE * np.percentile(both, BRIGHT_PERCENTILE))
+    v_lit = float(np.median(rel[lit]))
+    return v_lit, (float(np.median(rel[bright])) if bright.any() else v_lit)
 
 
 def pilot_batch_size(method: str, pixels: int) -> int:
@@ -313,8 +354,10 @@ class _Channels(Integrator):
                 spent_rays += c.pilots[-1].rays
             ran = [p for p in c.pilots if p.skipped is None]
             for k, p in enumerate(ran):
-                v = p.median_relative_variance = median_relative_variance([q.image for q in ran],
-                                                                          [q.variance for q in ran], k)
+                both = relative_variances([q.image for q in ran], [q.variance for q in ran], k)
+                v = None if both is None else max(both)
+                if both is not None:
+                    p.median_relative_variance, p.bright_median_relative_variance = both
                 p.efficiency = 0.0 if (v is None or not math.isfinite(v) or p.found == 0) else \
                     1.0 / max(v * p.cost, 1e-300)
             if c.chosen is None:
