@@ -116,15 +116,16 @@ class Pilot:
     variance: np.ndarray | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
-        """The pilot for the report (JSON: an infinite V, where the pilot left most lit pixels dark, is
-        given as null with a note)."""
+        """The pilot for the report (JSON: an infinite median, where the pilot left most of the lit
+        pixels or of the bright region dark, is given as null with a note)."""
         out = {k: v for k, v in asdict(self).items() if k not in ("image", "variance")}
         notes = {"median_relative_variance": "most of the pixels that some pilot lit stayed dark in this one",
                  "bright_median_relative_variance": "most of the bright region stayed dark in this one"}
-        dark = [why for key, why in notes.items() if out[key] is not None and not math.isfinite(out[key])]
-        for key in notes:
+        dark = []
+        for key, why in notes.items():
             if out[key] is not None and not math.isfinite(out[key]):
                 out[key] = None
+                dark.append(why)
         if dark:
             out["note"] = "; ".join(dark) + ": efficiency 0"
         return out
