@@ -38,7 +38,6 @@ from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.allocator import keep_freed_memory  # noqa: E402
 from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
-from tracer.integrators.hybrid import BRIGHT_PERCENTILE, BRIGHT_SHARE  # noqa: E402
 from tracer.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.units import luminance  # noqa: E402
@@ -91,9 +90,8 @@ def reference_seconds(name: str, ref_seconds: float) -> float:
 
 
 def bright_region(y_ref: np.ndarray) -> np.ndarray:
-    """Pixels above 10 % of the reference's 99th percentile (bool, the image's shape): the region the
-    automatic choice also judges its pilots on (tracer.integrators.hybrid)."""
-    return y_ref > BRIGHT_SHARE * np.percentile(y_ref, BRIGHT_PERCENTILE)
+    """Pixels above 10 % of the reference's 99th percentile (bool, the image's shape)."""
+    return y_ref > 0.1 * np.percentile(y_ref, 99)
 
 
 def errors(y: np.ndarray, ref: dict, wall: float) -> dict:

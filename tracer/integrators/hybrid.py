@@ -14,18 +14,17 @@ that is unbiased (or consistent, the photon method) for it.
 Choice. For a channel whose method is "auto", every method that applies to it runs a short pilot
 (a share ``pilot_share`` of the budget, split between them) on a stream of its own, and is scored by
 its efficiency 1 / (V x cost), cost the pilot's seconds (a budget in seconds) or ray segments (a
-budget in rays, which also makes the choice reproducible). V is the larger of two medians of a pixel's
-relative variance (from the pilot's replicates; a pixel that the method left dark counts as infinitely
-noisy): over the pixels some pilot lit (the typical pixel: on a HUD, mostly the background), and over
-the bright region (pixels above a tenth of the 99th percentile of the pilots' images combined with
-inverse-variance weights, as benchmarks/convergence.py defines it on its reference: the symbols, a
-focused spot). Either alone misleads: the median of the lit pixels passes a method that fails on a
-bright feature covering a few per cent of the image (backward tracing of a spot that a lens focuses
-from a small LED, beside a surface the LED lights directly, reaches the spot only by chance), and the
-bright region alone passes one that leaves the background noisy. The most efficient method renders
-the channel with the rest of the budget; the pilots are reported, not merged into the image. The
-variance of a pixel falls as 1 / N for every method here, so V x cost does not depend on the pilot's
-length.
+budget in rays, which also makes the choice reproducible). V is the largest of four medians of a
+pixel's relative variance (from the pilot's replicates; a pixel that the method left dark counts as
+infinitely noisy): over the pixels some pilot lit, and over the brightest half, tenth and hundredth
+of them (at least 8 pixels each) in the pilots' images combined with inverse-variance weights. A
+method must be good at every level of the image, the typical pixel (on a HUD, mostly the black
+background) as well as the brightest (the symbols, a focused spot): by the lit pixels' median
+alone, backward tracing with next-event estimation wins on a screen lit directly by a small LED and,
+beside that, through a lens that focuses it into a spot, which backward tracing reaches only by
+chance (tests/test_hybrid.py). The most efficient method renders the channel with the rest of the
+budget; the pilots are reported, not merged into the image. The variance of a pixel falls as 1 / N
+for every method here, so V x cost does not depend on the pilot's length.
 
 What applies (model no more than the scene needs; the report says what was skipped and why):
 
@@ -102,10 +101,10 @@ class Pilot:
     batch_size: int = 0
     replicates: int = 0
     cost: float = 0.0
-    #: The medians of a pixel's relative variance over the lit pixels and over the bright region
-    #: (:func:`relative_variances`); V is the larger.
-    median_relative_variance: float | None = None
-    bright_median_relative_variance: float | None = None
+    #: V (the largest of the medians of a pixel's relative variance over :data:`STRATA`) and the medians
+    #: by stratum (:func:`relative_variances`).
+    relative_variance: float | None = None
+    relative_variance_medians: dict | None = None
     efficiency: float = 0.0
     #: The method's units of work in the pilot (paths of a backward batch, else its batch size: particles
     #: or photons) and, summed over the pixels, its image's variance (cd/m^2)^2 times those units: what
@@ -116,18 +115,18 @@ class Pilot:
     variance: np.ndarray | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
-        """The pilot for the report (JSON: an infinite median, where the pilot left most of the lit
-        pixels or of the bright region dark, is given as null with a note)."""
+        """The pilot for the report (JSON: an infinite median, where the pilot left most of a stratum's
+        pixels dark, is given as null, with a note naming the strata)."""
         out = {k: v for k, v in asdict(self).items() if k not in ("image", "variance")}
-        notes = {"median_relative_variance": "most of the pixels that some pilot lit stayed dark in this one",
-                 "bright_median_relative_variance": "most of the bright region stayed dark in this one"}
-        dark = []
-        for key, why in notes.items():
-            if out[key] is not None and not math.isfinite(out[key]):
-                out[key] = None
-                dark.append(why)
+        medians = out["relative_variance_medians"] or {}
+        dark = [name for name, v in medians.items() if not math.isfinite(v)]
+        out["relative_variance_medians"] = {name: (v if math.isfinite(v) else None) for name, v in medians.items()} \
+            if medians else None
+        if out["relative_variance"] is not None and not math.isfinite(out["relative_variance"]):
+            out["relative_variance"] = None
         if dark:
-            out["note"] = "; ".join(dark) + ": efficiency 0"
+            out["note"] = (f"most pixels of {', '.join(dark)} (of the pixels that some pilot lit) stayed dark in "
+                           "this one: efficiency 0")
         return out
 
 
@@ -179,9 +178,10 @@ def applicable(world, lights: bool, environment: bool) -> dict[str, str | None]:
     return out
 
 
-#: The bright region: pixels above this share of the 99th percentile of the pilots' combined image
-#: (benchmarks/convergence.py's bright_region on its reference).
-BRIGHT_SHARE, BRIGHT_PERCENTILE = 0.1, 99.0
+#: The strata a pilot is judged on: the brightest of these shares of the lit pixels (of the pilots'
+#: combined image), each at least STRATUM_PIXELS pixels; "lit" is all of them.
+STRATA = {"lit": 1.0, "brightest_half": 0.5, "brightest_tenth": 0.1, "brightest_hundredth": 0.01}
+STRATUM_PIXELS = 8
 
 
 def combined_image(images: list[np.ndarray], variances: list[np.ndarray]) -> np.ndarray:
@@ -201,24 +201,26 @@ def combined_image(images: list[np.ndarray], variances: list[np.ndarray]) -> np.
     return out
 
 
-def relative_variances(images: list[np.ndarray], variances: list[np.ndarray], k: int) -> tuple[float, float] | None:
-    """The two medians of var / mean^2 of pilot ``k`` (module docstring), a pixel that pilot ``k`` left
-    dark counted as infinite: over the pixels any pilot lit, and over the bright region of the pilots'
-    :func:`combined_image`. None where no pilot lit anything. V, the figure the efficiency divides by,
-    is the larger."""
+def relative_variances(images: list[np.ndarray], variances: list[np.ndarray], k: int) -> dict[str, float] | None:
+    """The medians of var / mean^2 of pilot ``k`` over each of :data:`STRATA` (module docstring), a
+    pixel that pilot ``k`` left dark counted as infinite: the pixels any pilot lit, and the brightest
+    half, tenth and hundredth of them in the pilots' :func:`combined_image`. None where no pilot lit
+    anything. V, the figure the efficiency divides by, is the largest."""
     brightest = max((float(y.max()) for y in images), default=0.0)
     if brightest <= 0:
         return None
     lit = np.zeros(images[0].shape, bool)
     for y in images:
         lit |= y > LIT_SHARE * brightest
-    y, var = images[k], variances[k]
+    y, var = images[k][lit], variances[k][lit]
     rel = np.full(y.shape, np.inf)
     np.divide(var, y * y, out=rel, where=y > 0)
-    both = combined_image(images, variances)
-    bright = lit & (both > BRIGHT_SHARE * np.percentile(both, BRIGHT_PERCENTILE))
-    v_lit = float(np.median(rel[lit]))
-    return v_lit, (float(np.median(rel[bright])) if bright.any() else v_lit)
+    order = np.argsort(-combined_image(images, variances)[lit], kind="stable")  # brightest first
+    out = {}
+    for name, share in STRATA.items():
+        n = min(len(order), max(STRATUM_PIXELS, math.ceil(share * len(order))))
+        out[name] = float(np.median(rel[order[:n]]))
+    return out
 
 
 def pilot_batch_size(method: str, pixels: int) -> int:
@@ -355,10 +357,9 @@ class _Channels(Integrator):
                 spent_rays += c.pilots[-1].rays
             ran = [p for p in c.pilots if p.skipped is None]
             for k, p in enumerate(ran):
-                both = relative_variances([q.image for q in ran], [q.variance for q in ran], k)
-                v = None if both is None else max(both)
-                if both is not None:
-                    p.median_relative_variance, p.bright_median_relative_variance = both
+                medians = relative_variances([q.image for q in ran], [q.variance for q in ran], k)
+                v = p.relative_variance = None if medians is None else max(medians.values())
+                p.relative_variance_medians = medians
                 p.efficiency = 0.0 if (v is None or not math.isfinite(v) or p.found == 0) else \
                     1.0 / max(v * p.cost, 1e-300)
             if c.chosen is None:
