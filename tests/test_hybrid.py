@@ -157,6 +157,25 @@ def test_auto_picks_on_its_pilots_the_method_a_longer_run_confirms(preset, name,
     assert chosen == confirmed == expected, (chosen, score)
 
 
+def test_the_score_ranks_pixels_in_the_combined_image_and_takes_the_worst_stratum():
+    """Two pilots of 100 pixels, 94 at 1 cd/m^2 and a spot of 6 at 100: pilot A is nearly exact on the
+    94 and dark on the spot, pilot B lights everything with a relative variance of 1e-2. The combined
+    image takes the spot from B alone (a dark pixel carries no weight) and the rest mostly from A; the
+    spot falls into the brightest tenth and hundredth (8 pixels, the smallest stratum), where A's
+    median is infinite, so A's V is infinite although its lit pixels' median is 1e-6."""
+    truth = np.ones(100)
+    truth[[3, 17, 42, 55, 68, 91]] = 100.0
+    a = np.where(truth > 1, 0.0, truth)
+    images, variances = [a, truth.copy()], [1e-6 * a * a, 1e-2 * truth * truth]
+    both = combined_image(images, variances)
+    np.testing.assert_allclose(both, truth, rtol=1e-12)
+    va, vb = relative_variances(images, variances, 0), relative_variances(images, variances, 1)
+    assert va["lit"] == pytest.approx(1e-6) and va["brightest_half"] == pytest.approx(1e-6)
+    assert va["brightest_tenth"] == math.inf and va["brightest_hundredth"] == math.inf
+    assert all(v == pytest.approx(1e-2) for v in vb.values())
+    assert relative_variances([np.zeros(4)], [np.zeros(4)], 0) is None
+
+
 def _lens_spot(folder):
     """A 2 mm LED 60 mm below a glass lens (f = 51 mm) that focuses part of its light into a spot on a
     white screen 90 mm above the lens; the rest of the screen sees the LED directly. The eye looks at
