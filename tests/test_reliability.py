@@ -601,3 +601,104 @@ def test_a_key_with_a_control_character_is_named_on_one_line(mirror, earlier):
     code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
     assert_one_line_error(code, err, "objects[2].emission.sha\\re", "unknown field")
     assert hashes(out) == before
+
+
+# -- the review of 2026-12-03: values that underflowed or crashed, names that escaped the checks --------
+TINY_OR_MISTYPED = {
+    # a pupil of 1e-5 mm made the pixel extent (a view factor) cancel to 0 and the estimate NaN
+    "pupil 1e-5": (_set(("eye", "pupil_diameter_mm"), 1e-5), "eye.pupil_diameter_mm"),
+    "pupil 1e-300": (_set(("eye", "pupil_diameter_mm"), 1e-300), "eye.pupil_diameter_mm"),
+    # a black image and "none reached a source" instead of a refusal
+    "luminance 1e-300": (_set(("objects", 2, "emission", "luminance"), 1e-300), "objects[2].emission.luminance"),
+    "flux 1e-300": (lambda d: d["objects"][2].update(emission={"flux": 1e-300}), "objects[2].emission.flux"),
+    "lobe 1e-30 deg": (_set(("objects", 0, "material"), {"type": "diffuser", "transmittance": 0.5,
+                                                        "sigma_deg": [1e-30, 3.0]}),
+                       "objects[0].material.sigma_deg[0]"),
+    # a metal that reflects nothing at normal incidence: the angular law divides by its R(0)
+    "metal 1 + 0i": (_set(("objects", 0, "material", "metal"), {"complex_ior": [1.0, 0.0]}),
+                     "objects[0].material.metal.complex_ior"),
+    "metal 0 + 0i": (_set(("objects", 0, "material", "metal"), {"complex_ior": [0.0, 0.0]}),
+                     "objects[0].material.metal.complex_ior"),
+    # true and 1.0 equal 1 in Python
+    "version true": (_set(("version",), True), "version"),
+    "version 1.0": (_set(("version",), 1.0), "version"),
+    # os functions raise ValueError on a NUL
+    "NUL in a mesh path": (_set(("objects", 0, "mesh"), "meshes/mirror.obj\0x"), "objects[0].mesh"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(TINY_OR_MISTYPED))
+def test_tiny_and_mistyped_values_give_one_line_naming_file_and_field(mirror, earlier, case):
+    """Before: a FloatingPointError traceback (pupil 1e-5 mm), black images reported as "no light
+    path found" (luminance 1e-300), overflow warnings (a 1e-30 deg lobe), divide-by-zero warnings and
+    a black mirror (complex index 0 or 1), a version of true accepted, a ValueError traceback for a
+    NUL. Now exit 2, one line, file and field named, the earlier outputs untouched."""
+    out, before = earlier
+    edit, field = TINY_OR_MISTYPED[case]
+    edit_json(mirror, edit)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", field)
+    assert hashes(out) == before
+
+
+@pytest.mark.parametrize("text,words", [
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 2 3\n", "line 4: a face refers to element 0"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/0 3/3\n", "line 7: a face refers to element 0"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt nan 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n", "non-finite texture coordinates"),
+], ids=["vertex 0", "texture coordinate 0", "NaN texture coordinate"])
+def test_obj_index_zero_and_non_finite_texture_coordinates_are_refused(mirror, earlier, text, words):
+    """OBJ counts from 1; trimesh took a 0 for the last vertex and rendered as if nothing were wrong. A
+    NaN texture coordinate looked an LCD's cell up from an undefined integer."""
+    out, before = earlier
+    (mirror / "meshes" / "mirror.obj").write_text(text)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", "objects[0].mesh", "meshes/mirror.obj", words)
+    assert hashes(out) == before
+
+
+def test_obj_indices_that_end_in_zero_are_not_taken_for_zero(mirror, tmp_path):
+    """The check for index 0 reads whole tokens: faces 10, 20, 30 and 1/10 are good ones."""
+    lines = [f"v {i % 7} {i // 7} 0" for i in range(31)] + [f"vt 0 {i / 31}" for i in range(31)]
+    (mirror / "meshes" / "mirror.obj").write_text("\n".join(lines + ["f 10 20 30", "f 1/10 2/20 3/30", ""]))
+    assert len(load_scene(mirror).objects[0].faces) == 2
+
+
+@pytest.mark.parametrize("where", ["empty", "the scene folder", "inside the scene folder", "a name too long"])
+def test_an_output_folder_that_is_empty_or_in_the_scene_or_too_long_is_refused(mirror, tmp_path, where,
+                                                                                monkeypatch):
+    """An empty --out (an unset $OUT in a script) wrote into the working directory; --out in the scene
+    folder mixed the outputs with the scene's files (and could overwrite an HDRI named image.exr); a
+    name longer than the file system takes gave exit 4 and the raw errno. Now exit 2 before any ray,
+    one line, and nothing made."""
+    monkeypatch.chdir(tmp_path)
+    out = {"empty": "", "the scene folder": mirror, "inside the scene folder": mirror / "renders" / "a",
+           "a name too long": tmp_path / ("n" * 300)}[where]
+    before = hashes(mirror), hashes(tmp_path)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err)
+    assert (hashes(mirror), hashes(tmp_path)) == before
+
+
+def test_readouts_of_a_file_that_is_not_a_report_give_one_line(tmp_path):
+    """A JSON list gave an AttributeError traceback; a field of the wrong type a garbled message."""
+    for name, text in (("list.json", "[]"), ("typed.json", json.dumps({"luminance": "bright", "hud": {}}))):
+        (tmp_path / name).write_text(text)
+        code, err = run_cli("readouts", tmp_path / name)
+        assert_one_line_error(code, err, name, "not a hud-trace report")
+
+
+def test_a_stop_before_the_first_batch_keeps_the_earlier_set(mirror, earlier):
+    """A Ctrl-C in the first half second replaced a good earlier set with a black one of 0 rays whose
+    warning blamed the scene ("none reached a source"). A render stopped before its first batch has
+    nothing to write: the folder keeps its set, and the command says so with status 130. A sweep
+    stopped so ends with the runs before it."""
+    from tracer.errors import StoppedBeforeFirstBatch
+    from tracer.render import render_scene
+    from tracer.sweep import open_outputs
+
+    out, before = earlier
+    with pytest.raises(StoppedBeforeFirstBatch):
+        render_scene(load_scene(mirror), "backward", Budget(rays=10**6), 1, out, should_stop=lambda: True)
+    assert hashes(out) == before
+    with pytest.raises(Exception, match="lies in the scene folder"):
+        open_outputs(mirror / "sweep", mirror)

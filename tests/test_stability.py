@@ -75,6 +75,39 @@ def test_forward_with_a_shrinking_pupil(tmp_path):
         load_scene(folder)
 
 
+def test_the_pixel_extent_holds_for_the_smallest_pupil_and_the_farthest_focus():
+    """The pixel extent is a disk's view factor, F = (1/2) [1 - (h^2 + rho^2 - a^2) / S], which in that
+    form cancels to 0 once the pupil's radius a is below 1e-8 of the focus distance h (a 1e-5 mm pupil,
+    focus at 1e10 mm): the backward estimate divided by it and was NaN. At focus 1e12 mm (the largest
+    allowed) the extent must equal the closed form at infinity, A cos^4 / f^2 integrated over the pixel,
+    for the smallest pupil allowed (0.01 mm) and the largest (20 mm)."""
+    from tracer.eye import ThinLensEye
+    from tracer.scene import EyeSpec
+
+    for pupil in (0.01, 4.0, 20.0):
+        spec = dict(position=np.zeros(3), gaze=np.array([0.0, 1, 0]), up=np.array([0.0, 0, 1]),
+                    pupil_diameter_mm=pupil, focal_length_mm=16.67, resolution=(9, 7), fov_deg=(120.0, 90.0),
+                    adaptation="log_average")
+        far = ThinLensEye(EyeSpec(accommodation_distance_mm=1e12, **spec)).extent
+        at_infinity = ThinLensEye(EyeSpec(accommodation_distance_mm=math.inf, **spec)).extent
+        assert np.all(far > 0)
+        np.testing.assert_allclose(far, at_infinity, rtol=1e-9)
+
+
+@pytest.mark.parametrize("pupil,focus", [(0.01, 50.0), (4.0, 1e10), (0.01, 1e12)])
+def test_a_panel_in_view_renders_its_luminance_through_a_pinhole_or_at_a_far_focus(tmp_path, pupil, focus):
+    """A Lambertian panel of 100 cd/m^2 that fills the central pixels renders 100 cd/m^2 there whatever
+    the pupil and the focus (the brightness theorem): backward tracing, through the smallest pupil
+    allowed and at the farthest focus, within 4 standard errors."""
+    folder = _panel_in_view(tmp_path / "panel", 50.0, pupil)
+    edit_json(folder, lambda d: d["eye"].update(accommodation_distance_mm=focus))
+    y, var, _ = render(folder, "backward", 200_000)
+    centre, centre_var = y[3:5, 3:5], var[3:5, 3:5]  # 11 deg from the panel's edge: beyond any blur here
+    assert np.all(np.isfinite(y)) and np.all(np.isfinite(var))
+    err = math.sqrt(centre_var.sum()) / centre.size
+    assert abs(centre.mean() - 100.0) <= 4 * err + 1e-6 * 100.0, (centre.mean(), err)
+
+
 def test_hdri_with_a_sun_of_1e9(preset, tmp_path):
     """A 1e9 cd/m^2 sun in a 1 cd/m^2 sky: finite everywhere, and the error falls with the budget."""
     folder = preset("analytic-furnace", resolution=(8, 8), fov_deg=(90.0, 90.0))

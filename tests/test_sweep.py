@@ -296,7 +296,7 @@ def no_render(monkeypatch):
      "objects[1] (object 'pupil_image', matched by 'p*') has no field 'emission'"),
     ("value out of range", ("--set", f"{PANEL}=1e11:1e13:3", "--log", PANEL),
      "the value 1e+13 (grid point 3 of 3): scene.json: objects[2].emission.luminance: must be <= 1e+12"),
-    ("zero pupil", ("--set", "eye.pupil_diameter_mm=0:4:3"), "eye.pupil_diameter_mm: must be > 0"),
+    ("zero pupil", ("--set", "eye.pupil_diameter_mm=0:4:3"), "eye.pupil_diameter_mm: must be >= 0.01"),
     ("not an integer", ("--set", "methods.backward.max_depth=4:9:3"),
      "the value 6.5 (grid point 2 of 3): scene.json: methods.backward.max_depth: expected an integer"),
     ("a boolean", ("--set", "methods.backward.next_event=0:1:2"), "methods.backward.next_event"),
@@ -366,22 +366,41 @@ def test_requirement_syntax():
 
 
 def test_ctrl_c_stops_the_current_run_and_writes_the_runs_done_marked_partial(tmp_path, monkeypatch):
-    """SIGINT during the second run: that run stops as a render does (written, marked partial, not
-    judged), no third run starts, and the two runs are written with the sweep's files: exit 130. A
-    second SIGINT aborts: exit 5, and the folder keeps the earlier sweep byte for byte."""
+    """SIGINT during the second run, after its first batch: that run stops as a render does (written,
+    marked partial, not judged), no third run starts, and the two runs are written with the sweep's
+    files: exit 130. A SIGINT before the second run's first batch ended: the sweep ends with the first
+    run (the second has no estimate to write). A second SIGINT aborts: exit 5, and the folder keeps
+    the earlier sweep byte for byte."""
     real = sweep_module.render_scene
 
-    def interrupting(times):
+    def interrupting(times, before_any_batch=False):
         def render(scene, method, budget, seed, out, progress=None, should_stop=None, **kw):
-            if out.name == "1":
-                for _ in range(times):
-                    os.kill(os.getpid(), signal.SIGINT)
-            return real(scene, method, budget, seed, out, progress=progress, should_stop=should_stop, **kw)
+            if out.name != "1":
+                return real(scene, method, budget, seed, out, progress=progress, should_stop=should_stop, **kw)
+            sent = []
+
+            def interrupt(*_):
+                if not sent:
+                    sent.append(True)
+                    for _ in range(times):
+                        os.kill(os.getpid(), signal.SIGINT)
+            if before_any_batch:
+                interrupt()
+            return real(scene, method, budget, seed, out, progress=interrupt, should_stop=should_stop, **kw)
         return render
+
+    out = tmp_path / "early"
+    monkeypatch.setattr(sweep_module, "render_scene", interrupting(1, before_any_batch=True))
+    code, err = sweep(out, "analytic-mirror", "--set", f"{PANEL}=500:1500:4")
+    assert code == 130, err
+    summary = load(out)
+    assert summary["partial"] is True and summary["runs_done"] == 1
+    assert sorted(p.name for p in (out / "runs").iterdir()) == ["0"]
 
     out = tmp_path / "s"
     monkeypatch.setattr(sweep_module, "render_scene", interrupting(1))
-    code, err = sweep(out, "analytic-mirror", "--set", f"{PANEL}=500:1500:4", "--require", "luminance.max >= 600")
+    code, err = sweep(out, "analytic-mirror", "--set", f"{PANEL}=500:1500:4", "--require", "luminance.max >= 600",
+                      "--batch-size", 8192)  # several batches per run: the stop comes after the first
     assert code == 130, err
     summary = load(out)
     assert summary["partial"] is True and summary["runs_done"] == 2
@@ -394,7 +413,7 @@ def test_ctrl_c_stops_the_current_run_and_writes_the_runs_done_marked_partial(tm
 
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     monkeypatch.setattr(sweep_module, "render_scene", interrupting(2))
-    code, err = sweep(out, "analytic-mirror", "--set", f"{PANEL}=500:1500:3")
+    code, err = sweep(out, "analytic-mirror", "--set", f"{PANEL}=500:1500:3", "--batch-size", 8192)
     assert code == 5, err
     assert err.strip().splitlines()[-1].startswith("aborted: nothing written")
     assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

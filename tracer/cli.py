@@ -44,7 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from .errors import EstimateOverflowError, SceneError
+from .errors import EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
 
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Signals that stop a render the way Ctrl-C does (batch schedulers send SIGTERM, a closed terminal SIGHUP).
@@ -198,6 +198,12 @@ def cmd_render(args) -> int:
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
                                           should_stop=flag, batch_size=args.batch_size, workers=args.workers,
                                           analyse=not args.no_analysis)
+    except StoppedBeforeFirstBatch as e:
+        if bar:
+            bar.close()
+            bar = None
+        print(f"{e}: nothing written; {args.out} keeps what it held", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
         return _write_errors(e, args.out)
     finally:
@@ -280,12 +286,19 @@ def cmd_readouts(args) -> int:
         path = path / "report.json"
     try:
         report = json.loads(path.read_text(encoding="utf-8"))
-        rows = readouts(report)
     except (OSError, UnicodeDecodeError, ValueError) as e:
         print(f"error: {path}: cannot be read as a report: {getattr(e, 'strerror', None) or e}", file=sys.stderr)
         return EXIT_INPUT
-    except (KeyError, TypeError) as e:
+    if not isinstance(report, dict):
+        print(f"error: {path}: not a hud-trace report (a JSON {type(report).__name__}, not an object)", file=sys.stderr)
+        return EXIT_INPUT
+    try:
+        rows = readouts(report)
+    except KeyError as e:
         print(f"error: {path}: not a hud-trace report (no field {e})", file=sys.stderr)
+        return EXIT_INPUT
+    except (TypeError, ValueError, AttributeError, IndexError):
+        print(f"error: {path}: not a hud-trace report (a field of the wrong type or shape)", file=sys.stderr)
         return EXIT_INPUT
     width = max(len(label) for label, _ in rows)
     for label, text in rows:
@@ -354,7 +367,7 @@ def cmd_eyebox(args) -> int:
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
-            outputs = OutputSet(args.out, OUTPUT_NAMES).open()  # checked and locked before the first ray
+            outputs = OutputSet(args.out, OUTPUT_NAMES, scene_root=scene.root).open()  # before the first ray
             try:
                 result = eyebox_scan(World(scene), args.half, args.step, args.field, args.threshold, progress=bar)
                 outputs.commit(output_files(result))
@@ -432,7 +445,7 @@ def cmd_sweep(args) -> int:
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene_dir = _resolve_scene(args.scene, Path(tmp))
-            outputs = open_outputs(args.out)  # checked and locked before the scene's grid is loaded
+            outputs = open_outputs(args.out, scene_dir)  # checked and locked before the grid is loaded
             try:
                 plan = plan_sweep(scene_dir, fields, requirements, tempfile.mkdtemp(dir=tmp), args.x, args.y,
                                   progress=checking)
@@ -571,13 +584,36 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def _import_holding_interrupts() -> bool:
+    """Import the modules the commands need with Ctrl-C held back; returns whether one came. A compiled
+    module (numpy's, OpenImageIO's) turns an interrupt during its initialisation into an ImportError
+    with a misleading message, so an interrupt must not land there."""
+    came = []
     try:
+        previous = signal.signal(signal.SIGINT, lambda *_: came.append(True))
+    except ValueError:  # not the main thread (main called by a host program): nothing to hold back
+        return False
+    try:
+        import presets  # noqa: F401
+
+        from . import eyebox, falsecolour, render, sweep  # noqa: F401
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return bool(came)
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        if _import_holding_interrupts():
+            raise KeyboardInterrupt
+        args = build_parser().parse_args(argv)  # the parser lists the methods: it imports them
         return args.func(args)
     except (SceneError, ArgumentError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
+    except KeyboardInterrupt:  # before a command installs its own handler (while its modules import)
+        print("interrupted before the work began: nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

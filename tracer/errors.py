@@ -58,3 +58,8 @@ class ImageReadError(TracerError):
 class EstimateOverflowError(TracerError):
     """A value of the estimate does not fit the outputs (float32 images, JSON): a scene whose
     luminances or fluxes are beyond what the tracer can represent."""
+
+
+class StoppedBeforeFirstBatch(TracerError):
+    """A render stopped (Ctrl-C, a cancel) before its first batch ended: there is no estimate to write,
+    so the output folder keeps what it held instead of taking a black image."""

@@ -38,13 +38,18 @@ def disk_view_factor(rho: np.ndarray, h: float, a: float) -> np.ndarray:
     """View factor from a differential area to a parallel disk (radius ``a``, distance ``h``,
     lateral offset ``rho`` of the element from the disk axis; all mm).
 
-    F = (1/2) [1 - (h^2 + rho^2 - a^2) / sqrt((h^2 + rho^2 + a^2)^2 - 4 a^2 rho^2)]
+    F = (1/2) [1 - (h^2 + rho^2 - a^2) / S],  S = sqrt((h^2 + rho^2 + a^2)^2 - 4 a^2 rho^2)
     (Howell, A Catalog of Radiation Heat Transfer Configuration Factors, factor B-13;
-    Modest, Radiative Heat Transfer, 3rd ed., doi:10.1016/C2010-0-65874-3, app. D).
+    Modest, Radiative Heat Transfer, 3rd ed., doi:10.1016/C2010-0-65874-3, app. D), evaluated as
+    F = a^2 (S + h^2 + a^2 - rho^2) / (S (S + X)), X = h^2 + rho^2 + a^2, the same number without the
+    cancellation of 1 - (...) / S, which loses every digit once a / h < 1e-8 (a pupil of 1e-5 mm, or
+    focus at 1e10 mm: F ~ a^2 / h^2 then).
     """
     rho2 = np.asarray(rho, dtype=np.float64) ** 2
     h2, a2 = h * h, a * a
-    return 0.5 * (1.0 - (h2 + rho2 - a2) / np.sqrt((h2 + rho2 + a2) ** 2 - 4.0 * a2 * rho2))
+    x = h2 + rho2 + a2
+    s = np.sqrt((x - 2.0 * a * np.sqrt(rho2)) * (x + 2.0 * a * np.sqrt(rho2)))
+    return a2 * (s + h2 + a2 - rho2) / (s * (s + x))
 
 
 class ThinLensEye:

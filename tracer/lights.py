@@ -41,7 +41,15 @@ MAX_CLUSTERS = 32
 DEFENSIVE = 0.1
 
 
+#: The smallest positive luminance of an emitter, cd/m^2: a thousandth of the eye's absolute threshold
+#: (about 1e-6); below it the float32 path weights of a few optical events underflow to zero.
+MIN_LUMINANCE = 1e-9
+
+
 def _emission_check(params: dict, fail):
+    if 0 < params.get("luminance", 0) < MIN_LUMINANCE:
+        fail("luminance", f"a luminance of {params['luminance']:.3g} cd/m^2 is below {MIN_LUMINANCE:g} (give 0 for a "
+                          "light that is off)")
     try:
         normalize_color(params["color"])
     except ValueError as e:

@@ -81,8 +81,14 @@ class OutputFile:
 class OutputSet:
     """The output folder of one render (see the module docstring)."""
 
-    def __init__(self, folder, names: tuple[str, ...]):
+    def __init__(self, folder, names: tuple[str, ...], scene_root=None):
+        """``scene_root``: the folder of the scene rendered, which the output folder must not be nor lie
+        in (the outputs would mix with, or overwrite, the scene's own files, and travel with the folder
+        wherever it is copied or zipped)."""
+        #: An empty name would be Path("."), the working directory: refused by :meth:`open`.
+        self._empty = isinstance(folder, str) and not folder.strip()
         self.folder = Path(folder)
+        self.scene_root = None if scene_root is None else Path(scene_root)
         self.names = tuple(names)
         self._fd: int | None = None
         self._created: list[Path] = []
@@ -91,6 +97,22 @@ class OutputSet:
     def open(self) -> OutputSet:
         """Check and lock the folder (creating it, and missing parents, if needed)."""
         folder = self.folder
+        if self._empty:
+            raise OutputFolderError("''", "an empty folder name; give the output folder (\".\" for this one)")
+        if "\0" in str(folder):
+            raise OutputFolderError(folder, "a folder name must not contain a NUL character")
+        try:
+            return self._open()
+        except OSError as e:  # the name itself: too long, a component not a folder, a loop of links
+            raise OutputFolderError(folder, f"cannot be used ({e.strerror or e})") from None
+
+    def _open(self) -> OutputSet:
+        folder = self.folder
+        if self.scene_root is not None:
+            root = Path(os.path.realpath(self.scene_root))
+            if Path(os.path.realpath(folder)).is_relative_to(root):
+                raise OutputFolderError(folder, f"lies in the scene folder {printable(root)}; the outputs would mix "
+                                                "with the scene's own files: choose a folder outside it")
         if folder.exists() and not folder.is_dir():
             raise OutputFolderError(folder, "exists and is not a folder")
         missing = []

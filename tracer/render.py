@@ -23,7 +23,7 @@ import numpy as np
 
 from . import __version__
 from .analysis import specular_paths
-from .errors import EstimateOverflowError
+from .errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from .hudfigures import erode, hud_figures
 from .imageio import read_exr_channels, read_image, write_exr, write_png
 from .integrators import INTEGRATORS, Budget, RenderResult
@@ -494,14 +494,18 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     preview.png and report.json are written as a set after the render
     (:class:`~tracer.outputs.OutputWriteError` if that fails; the earlier outputs are then kept). They
     share a run id (``report["run_id"]``, the EXR attribute ``hud:run_id``). A partial render (stopped
-    through ``should_stop``) skips the brightness-theorem analysis, so that it ends promptly."""
+    through ``should_stop``) skips the brightness-theorem analysis, so that it ends promptly; one stopped
+    before its first batch ended has nothing to write and raises
+    :class:`~tracer.errors.StoppedBeforeFirstBatch` (the folder keeps its earlier outputs)."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
-    outputs = OutputSet(out_dir, OUTPUT_NAMES).open()
+    outputs = OutputSet(out_dir, OUTPUT_NAMES, scene_root=scene.root).open()
     try:
         world = World(scene)
         integrator = INTEGRATORS[method](world, seed, batch_size)
         integrator, result = run_render(integrator, budget, workers, progress, should_stop)
+        if result.partial and result.batches == 0:
+            raise StoppedBeforeFirstBatch(f"stopped after {result.seconds:.1f} s, before the first batch ended")
         products = render_products(integrator.world, integrator, result, budget, analyse)
         outputs.commit(products.files())
         outputs.keep()

@@ -69,7 +69,7 @@ import numpy as np
 
 from .environment import Environment, environment_from_spec
 from .errors import SceneError
-from .lights import EMISSION, Emission, make_emission
+from .lights import EMISSION, MIN_LUMINANCE, Emission, make_emission
 from .optics.materials import MATERIALS
 from .pupil import pupil_diameter_mm
 from .schema import Field, fail_in, parse_block
@@ -82,6 +82,7 @@ from .validate import (
     MAX_PIXELS,
     MAX_PUPIL_MM,
     MAX_SCALE,
+    MIN_PUPIL_MM,
     MIN_SCALE,
     FieldChecker,
     parse_json,
@@ -355,6 +356,22 @@ def _emission(ck: FieldChecker, spec, fld: str) -> tuple[dict, Aim | None]:
     return params, (_aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None)
 
 
+#: An index 0 in an OBJ face (of a vertex, texture coordinate or normal): OBJ counts from 1 (and from -1
+#: backward), so 0 refers to nothing; trimesh would take it as the last element.
+_OBJ_ZERO_INDEX = re.compile(rb"(?m)^f[ \t][^\n]*?(?:(?<=[ \t])|/)0(?=[/ \t\r]|$)")
+
+
+def _check_obj_indices(ck: FieldChecker, path: Path, rel: str, fld: str):
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
+    bad = _OBJ_ZERO_INDEX.search(data)
+    if bad:
+        line = data.count(b"\n", 0, bad.start()) + 1
+        ck.fail(fld, f"cannot read mesh {rel}: line {line}: a face refers to element 0 (OBJ counts from 1)")
+
+
 def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     """(vertices (v,3), faces (f,3), uv (v,2) or None) from PLY/OBJ/GLB through trimesh."""
     import trimesh
@@ -366,6 +383,8 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
         ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
     if not found:
         ck.fail(fld, f"mesh file not found: {rel}")
+    if path.suffix.lower() == ".obj":
+        _check_obj_indices(ck, path, rel, fld)
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True)
         if isinstance(loaded, trimesh.Scene):
@@ -402,6 +421,8 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     if visual is not None and getattr(visual, "kind", None) == "texture" and getattr(visual, "uv", None) is not None:
         uv_arr = np.asarray(visual.uv, dtype=np.float64)
         if uv_arr.shape == (len(v), 2):
+            if not np.all(np.isfinite(uv_arr)):
+                ck.fail(fld, f"{rel} has non-finite texture coordinates")
             uv = uv_arr
     return v, f, uv
 
@@ -518,7 +539,7 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                                              'or a lit environment')
         pupil = pupil_diameter_mm(adapt, age_years=age)
     else:
-        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=0.0, min_exclusive=True,
+        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=MIN_PUPIL_MM,
                           max_value=MAX_PUPIL_MM)
     focal = ck.number(spec.get("focal_length_mm", 16.67), "eye.focal_length_mm", min_value=0.0, min_exclusive=True,
                       max_value=MAX_FOCAL_MM)
@@ -602,7 +623,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             {"name", "description", "environment", "methods", "backward", "forward", "polarisation"})
     if raw["format"] != FORMAT:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
-    if raw["version"] != VERSION:
+    if type(raw["version"]) is not int or raw["version"] != VERSION:  # true and 1.0 equal 1 in Python
         ck.fail("version", f"this tracer reads version {VERSION}, got {json.dumps(raw['version'])}")
     env = environment_from_spec(raw.get("environment", {"type": "none"}), root, fname, allow_external)
     eye = _eye(ck, raw["eye"], env)
@@ -667,10 +688,12 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx, local_y=ly / np.linalg.norm(ly))
         if emission is not None:
             obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
-            if obj.emission.luminance > MAX_LUMINANCE:
+            lum = obj.emission.luminance
+            if lum > MAX_LUMINANCE or 0 < lum < MIN_LUMINANCE:
                 where = "emission" if "emission" in o else "material"
-                ck.fail(f"{fld}.{where}.flux", f"gives a luminance of {obj.emission.luminance:.3g} cd/m^2 over the "
-                                               f"object's {obj.area_mm2:.3g} mm^2, above {MAX_LUMINANCE:g}")
+                ck.fail(f"{fld}.{where}.flux", f"gives a luminance of {lum:.3g} cd/m^2 over the object's "
+                                               f"{obj.area_mm2:.3g} mm^2, outside [{MIN_LUMINANCE:g}, "
+                                               f"{MAX_LUMINANCE:g}] (give 0 for a light that is off)")
         objects.append(obj)
 
     # Aim targets must exist; apertures must be planar for the solid-angle pdf to be exact.

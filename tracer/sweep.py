@@ -66,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import SceneError
+from .errors import SceneError, StoppedBeforeFirstBatch
 from .falsecolour import FONT, GLYPH_H, INK, PAPER, colour_map, draw_text, png_file, text_size, value_label
 from .lights import EMISSION
 from .outputs import STAGING_PREFIX, OutputFile, OutputFolderError, OutputSet, OutputWriteError
@@ -768,11 +768,13 @@ class SweepResult:
         }
 
 
-def open_outputs(out_dir) -> OutputSet:
+def open_outputs(out_dir, scene=None) -> OutputSet:
     """The sweep's output folder, checked and locked before anything is read or traced
-    (:meth:`tracer.outputs.OutputSet.open` for its three files; its ``runs``, where it exists, must be a
-    folder): :class:`~tracer.outputs.OutputFolderError` if it cannot take the sweep. Close it when done."""
-    outputs = OutputSet(out_dir, OUTPUT_NAMES).open()
+    (:meth:`tracer.outputs.OutputSet.open` for its three files, outside the folder of ``scene`` (a scene
+    folder or its scene.json) where given; its ``runs``, where it exists, must be a folder):
+    :class:`~tracer.outputs.OutputFolderError` if it cannot take the sweep. Close it when done."""
+    root = None if scene is None else (Path(scene).parent if Path(scene).name == SCENE_FILE else Path(scene))
+    outputs = OutputSet(out_dir, OUTPUT_NAMES, scene_root=root).open()
     runs_dir = outputs.folder / RUNS
     if runs_dir.is_symlink() or (runs_dir.exists() and not runs_dir.is_dir()):
         outputs.close()
@@ -803,9 +805,13 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
                 result.stopped = True
                 break
             scene = plan.load(k)
-            report, rendered = render_scene(scene, method, budget, seed, staging / RUNS / str(k),
-                                            progress=_run_progress(progress, k, n), should_stop=should_stop,
-                                            batch_size=batch_size, workers=workers)
+            try:
+                report, rendered = render_scene(scene, method, budget, seed, staging / RUNS / str(k),
+                                                progress=_run_progress(progress, k, n), should_stop=should_stop,
+                                                batch_size=batch_size, workers=workers)
+            except StoppedBeforeFirstBatch:  # the run has no estimate: the sweep ends with the runs before it
+                result.stopped = True
+                break
             run = Run(k, plan.grid[k], report)
             result.runs.append(run)
             if on_run is not None:

@@ -29,8 +29,10 @@ MAX_FLUX = 1e10
 MAX_COORD_MM = 1e7
 #: A transform scales lengths by at least MIN_SCALE and at most MAX_SCALE.
 MIN_SCALE, MAX_SCALE = 1e-6, 1e6
-#: Largest pupil diameter, mm (an eye's is at most 9; optical instruments stay below this).
-MAX_PUPIL_MM = 20.0
+#: Smallest and largest pupil diameter, mm (an eye's is 1.5 to 9; optical instruments stay below 20).
+#: Below 0.01 mm the geometric optics of the thin-lens eye no longer holds (the Airy disk of a 10 um
+#: pupil spans 4 deg at 555 nm), and its area underflows long before the pupil reaches zero.
+MIN_PUPIL_MM, MAX_PUPIL_MM = 0.01, 20.0
 #: Largest eye focal length, mm (an eye's is 17).
 MAX_FOCAL_MM = 1000.0
 #: Largest accommodation distance, mm (beyond it, give "infinity").
@@ -169,6 +171,8 @@ class FieldChecker:
         no "..", no link out of it) unless external files are allowed: a scene folder is self-contained
         (copied, zipped for a cluster, hashed). Returns the path (not checked for existence)."""
         rel = self.string(rel, fld)
+        if "\0" in rel:  # no file system takes one (os functions raise ValueError on it)
+            self.fail(fld, f"{json.dumps(rel)}: a file name must not contain a NUL character")
         if self.allow_external:
             return Path(root) / rel
         p = Path(rel)

@@ -137,6 +137,20 @@ def _reflection_frame(it: Interaction) -> np.ndarray:
 IDEAL_REFLECTION = {"b": 0.0, "c": -1.0, "d": 0.0}
 
 
+def _metal_check(params: dict, fail):
+    """A metal's complex index must reflect at normal incidence: R(0) = |(1 - eta) / (1 + eta)|^2, which
+    the angular law divides by (n = 1, kappa = 0 reflects nothing; a real metal's R(0) is above 0.5)."""
+    metal = params.get("metal")
+    if metal is not None:
+        eta = complex(*metal["complex_ior"])
+        r0 = abs((1 - eta) / (1 + eta)) ** 2 if eta != -1 else 1.0
+        if eta.real <= 0:
+            fail("metal.complex_ior", f"n must be above 0, got {eta.real:g} (aluminium at 550 nm: 0.96, 6.69)")
+        if r0 < 1e-3:
+            fail("metal.complex_ior", f"n = {eta.real:g}, kappa = {eta.imag:g} reflects {r0:.3g} at normal incidence, "
+                                      "below 0.001: not a metal (aluminium at 550 nm: 0.96, 6.69)")
+
+
 @material
 class Mirror(BSDF):
     """Mirror of RGB reflectance R, reflecting on both sides about the shading normal.
@@ -154,7 +168,8 @@ class Mirror(BSDF):
                            description="Fresnel reflection of a metal: angle-dependent and polarising",
                            fields=(Field("complex_ior", "pair", unit="1", minimum=0.0, maximum=100.0,
                                          label="Complex IOR", description="n and kappa of the metal (aluminium "
-                                         "at 550 nm: 0.96, 6.69)", ui_default=[0.96, 6.69]),))))
+                                         "at 550 nm: 0.96, 6.69)", ui_default=[0.96, 6.69]),))),
+                    check=_metal_check)
     flags = DELTA | REFLECTION
 
     def __init__(self, objects):
@@ -607,8 +622,9 @@ class GaussianDiffuser(BSDF):
 
     schema = Schema("diffuser", "Gaussian diffuser", "Narrow-angle transmissive scatterer (Gaussian lobe)",
                     (_rgb("transmittance", label="Transmittance", description="Scattered transmittance, 0..1"),
-                     Field("sigma_deg", "pair", unit="deg", minimum=0.0, maximum=60.0, exclusive_min=True,
-                           label="Lobe width", description="Lobe standard deviations along local x and y, degrees",
+                     Field("sigma_deg", "pair", unit="deg", minimum=1e-3, maximum=60.0,
+                           label="Lobe width", description="Lobe standard deviations along local x and y, degrees "
+                                                           "(0.001 at least: float32 directions resolve 1e-5 deg)",
                            ui_default=[3.0, 3.0])),
                     can_aim=True)
     flags = TRANSMISSION
