@@ -475,5 +475,8 @@ class PhotonTracer(BackwardTracer):
                 f"were never used (efficiency {result.efficiency:.3g}); {why}")
         elif figures["photons_stored"] == 0 and result.paths:
             result.warnings.append(
-                f"no photon reached a scattering surface ({emitted:,} emitted): only direct light "
-                "(connections) lights the surfaces in view")
+                f"no photon reached a scattering surface after another event ({emitted:,} emitted; photons are "
+                "stored only after their first event, since connections carry direct light): only direct light "
+                "lights the surfaces in view, and the backward method renders such a scene alone"
+                if self.next_event else
+                f"no photon reached a scattering surface ({emitted:,} emitted): the surfaces in view stay dark")
