@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from tracer.errors import SceneError
 from tracer.falsecolour import (
     ADVANCE,
     FONT,
@@ -233,6 +234,17 @@ def test_luminance_comes_from_y_or_from_rgb(tmp_path):
     np.testing.assert_allclose(read_luminance(tmp_path / "rgb.exr"), luminance(rgb.astype(np.float32)), rtol=1e-6)
     write_exr(tmp_path / "y.exr", {"Y": rgb[..., 0], "R": rgb[..., 1], "G": rgb[..., 1], "B": rgb[..., 1]})
     np.testing.assert_array_equal(read_luminance(tmp_path / "y.exr"), rgb[..., 0].astype(np.float32))
+    # a negative luminance is no luminance (an image of -5 cd/m^2 was coloured as if it were dark); the
+    # rounding of a denoiser or a colour transform, a millionth of the brightest pixel, is tolerated
+    for low, refused in ((-5.0, True), (-1e-5, False)):
+        y = rgb[..., 0].copy()
+        y[0, 0] = low
+        write_exr(tmp_path / "neg.exr", {"Y": y})
+        if refused:
+            with pytest.raises(SceneError, match="neg.exr.*Y.*negative luminance"):
+                read_luminance(tmp_path / "neg.exr")
+        else:
+            assert read_luminance(tmp_path / "neg.exr")[0, 0] == np.float32(low)
 
 
 def test_command_line_on_a_render_and_its_refusals(tmp_path):

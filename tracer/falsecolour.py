@@ -491,7 +491,12 @@ def read_luminance(path) -> np.ndarray:
                                                 f"{have})")
     if not np.all(np.isfinite(y)):
         raise SceneError(str(path), name, "holds non-finite values (NaN or Inf)")
-    return np.asarray(y, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    low, high = float(y.min()), float(y.max())
+    if low < -1e-6 * max(high, 0.0):  # rounding (a denoiser's, a colour transform's) is tolerated
+        raise SceneError(str(path), name, f"holds negative luminance (down to {low:.4g} cd/m^2): not a luminance "
+                                          "image")
+    return y
 
 
 def write_as_set(path, write, check) -> None:
