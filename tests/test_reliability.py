@@ -622,6 +622,8 @@ TINY_OR_MISTYPED = {
     # true and 1.0 equal 1 in Python
     "version true": (_set(("version",), True), "version"),
     "version 1.0": (_set(("version",), 1.0), "version"),
+    # null was the identity here and refused for every other block
+    "transform null": (_set(("objects", 0, "transform"), None), "objects[0].transform"),
     # os functions raise ValueError on a NUL
     "NUL in a mesh path": (_set(("objects", 0, "mesh"), "meshes/mirror.obj\0x"), "objects[0].mesh"),
 }

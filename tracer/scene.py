@@ -271,9 +271,8 @@ def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
 
 
 def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
-    """A 4 x 4 world matrix (mm) from ``matrix`` or translate/rotate_deg/scale; rejects degenerate ones."""
-    if spec is None:
-        return np.eye(4)
+    """A 4 x 4 world matrix (mm) from ``matrix`` or translate/rotate_deg/scale; rejects degenerate ones.
+    An absent transform is the identity; a null one is refused, as every other null block is."""
     ck.obj(spec, fld)
     if "matrix" in spec:
         ck.keys(spec, fld, {"matrix"}, set())
@@ -652,7 +651,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         files += [v for k, v in mat.params.items() if k.endswith("_file")]
         rel = ck.string(o["mesh"], f"{fld}.mesh")
         files.append(rel)
-        m = _transform(ck, o.get("transform"), f"{fld}.transform")
+        m = _transform(ck, o["transform"], f"{fld}.transform") if "transform" in o else np.eye(4)
         v, f, uv = _load_mesh(ck, root, rel, f"{fld}.mesh")
         if f.min() < 0 or f.max() >= len(v):
             ck.fail(f"{fld}.mesh", f"{rel}: face indices out of range")

@@ -111,6 +111,19 @@ def parse_json(text: str, file: str):
         raise SceneError(file, "", f"malformed JSON: {e}") from None
 
 
+def _json_kind(value) -> str:
+    """What a parsed JSON value is, in JSON's words (null, a number, a string, a list)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return json.dumps(value)
+    if isinstance(value, int | float):
+        return f"the number {value:g}"
+    if isinstance(value, str):
+        return f"the string {json.dumps(value)[:40]}"
+    return "a list" if isinstance(value, list) else type(value).__name__
+
+
 class FieldChecker:
     """Field validation that names the file and the JSON path of every error.
 
@@ -128,7 +141,7 @@ class FieldChecker:
 
     def obj(self, value, fld: str) -> dict:
         if not isinstance(value, dict):
-            self.fail(fld, f"expected an object, got {type(value).__name__}")
+            self.fail(fld, f"expected an object, got {_json_kind(value)}")
         return value
 
     def keys(self, d: dict, fld: str, required: set[str], optional: set[str]):
