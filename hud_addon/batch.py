@@ -132,6 +132,9 @@ def _render(args, blend: Path, outputs) -> int:
     if "error" in figures:
         print(f"error: {blend.name}: {figures['error']}", file=sys.stderr)
         return 2
+    if "stopped" in figures:
+        print(f"{blend.name}: {figures['stopped']}; {outputs.folder} keeps what it held", file=sys.stderr)
+        return 130
     figures |= {"blend": str(blend)}
     text = finite_json(figures)
     size = (scene.render.resolution_x * scene.render.resolution_percentage // 100,

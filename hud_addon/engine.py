@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..tracer.errors import SceneError, TracerError
+from ..tracer.errors import SceneError, StoppedBeforeFirstBatch, TracerError
 from ..tracer.falsecolour import false_colour, png_file, write_as_set
 from ..tracer.integrators import INTEGRATORS, Budget
 from ..tracer.render import finite_json, render_products, run_render
@@ -83,15 +83,22 @@ def write_passes(layer, image: np.ndarray, var_y: np.ndarray, channels: dict | N
     layer.passes["Y_noise"].rect.foreach_set(np.ascontiguousarray(noise, dtype=np.float32).ravel())
 
 
-def _fail(engine, message: str) -> dict:
-    engine.report({"ERROR"}, f"HUD Tracer: {message}")
+def _fail(engine, scene, message: str, key: str = "error") -> dict:
+    """A render that gives no estimate: ``key`` "error" (reported as an error) or "stopped" (cancelled
+    before its first batch ended, reported as information). The scene's last report and false-colour
+    view are dropped, so that neither the readouts nor a file Blender writes now shows an earlier
+    render's figures as this one's."""
+    engine.report({"ERROR"} if key == "error" else {"INFO"}, f"HUD Tracer: {message}")
+    REPORTS.pop(scene.name, None)
+    FALSE_COLOUR.pop(scene.name, None)
     LAST_RENDER.clear()
-    LAST_RENDER["error"] = message
+    LAST_RENDER[key] = message
     return dict(LAST_RENDER)
 
 
 def render_final(engine, depsgraph) -> dict:
-    """Render the depsgraph's scene into ``engine``'s result. Returns the report (or {"error": ...})."""
+    """Render the depsgraph's scene into ``engine``'s result. Returns the report, or {"error": ...}, or
+    {"stopped": ...} when test_break ended the render before its first batch (the result stays empty)."""
     scene = depsgraph.scene
     s = scene.hud
     budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds)
@@ -101,9 +108,9 @@ def render_final(engine, depsgraph) -> dict:
             export_scene(depsgraph, folder)
             tracer_scene = load_scene(folder)
         except SceneError as e:
-            return _fail(engine, blender_terms(e, folder, scene))
+            return _fail(engine, scene, blender_terms(e, folder, scene))
         except ValueError as e:
-            return _fail(engine, str(e))
+            return _fail(engine, scene, str(e))
         for w in generated_image_warnings(scene):
             engine.report({"WARNING"}, f"HUD Tracer: {w}")
         world = World(tracer_scene)
@@ -129,9 +136,12 @@ def render_final(engine, depsgraph) -> dict:
             integrator, result = run_render(integrator, budget, worker_count(scene), progress, engine.test_break,
                                             preview)
             products = render_products(integrator.world, integrator, result, budget)
+        except StoppedBeforeFirstBatch as e:
+            engine.end_result(rr)
+            return _fail(engine, scene, f"{e}: nothing rendered", "stopped")
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
-            return _fail(engine, str(e))
+            return _fail(engine, scene, str(e))
         write_passes(rr.layers[0], products.image, products.var_y, channels_of(result.film))
         engine.end_result(rr)
         full = engine.get_result()  # stamp data belongs to the whole result, not to the part just written

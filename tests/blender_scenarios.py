@@ -474,15 +474,16 @@ class _Pass:
 
 
 class StubEngine:
-    """Stands in for a RenderEngine: test_break turns true after ``stop_after`` calls."""
+    """Stands in for a RenderEngine: test_break turns true after ``stop_after`` calls, or (``stop_after``
+    None) at the first call after the render reported progress, that is after its first merged batch."""
 
     def __init__(self, stop_after):
         self.stop_after, self.calls, self.progress, self.reports, self.passes = stop_after, 0, [], [], {}
-        self.updates, self.stamps = 0, {}
+        self.updates, self.stamps, self.result = 0, {}, None
 
     def test_break(self):
         self.calls += 1
-        return self.calls > self.stop_after
+        return bool(self.progress) if self.stop_after is None else self.calls > self.stop_after
 
     def update_progress(self, f):
         self.progress.append(f)
@@ -522,8 +523,9 @@ class StubEngine:
         pass
 
 
-def scenario_cancel(threads):
-    """A 600 s render cancelled at the second test_break, on ``threads`` processes."""
+def scenario_cancel(threads, when):
+    """A 600 s render on ``threads`` processes cancelled at the first test_break after the first batch
+    was merged (``when`` "after_first_batch") or at the very first one ("at_once")."""
     import time
 
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
@@ -532,14 +534,17 @@ def scenario_cancel(threads):
     scene.hud.method, scene.hud.budget, scene.hud.seconds = "forward", "SECONDS", 600.0
     scene.render.threads_mode, scene.render.threads = "FIXED", int(threads)
     engine_mod = sys.modules[f"{module}.hud_addon.engine"]
-    stub = StubEngine(stop_after=1)
+    engine_mod.REPORTS[scene.name] = {"blender": {"frame": scene.frame_current}}  # an earlier render's
+    stub = StubEngine(stop_after={"after_first_batch": None, "at_once": 0}[when])
     t0 = time.perf_counter()
     figures = engine_mod.render_final(stub, bpy.context.evaluated_depsgraph_get())
     seconds = time.perf_counter() - t0
-    passes = stub.result.layers[0].passes
+    passes = stub.result.layers[0].passes if stub.result is not None else {}
+    out = {"figures": figures, "test_break_calls": stub.calls, "seconds": seconds, "reports": stub.reports,
+           "samples": {k: passes[k].values for k in ("Combined", "Y", "Y_noise") if k in passes},
+           "kept_report": scene.name in engine_mod.REPORTS, "last_render": dict(engine_mod.LAST_RENDER)}
     disable(module)
-    return {"figures": figures, "test_break_calls": stub.calls, "seconds": seconds,
-            "samples": {k: passes[k].values for k in ("Combined", "Y", "Y_noise")}}
+    return out
 
 
 def scenario_progressive(seconds):

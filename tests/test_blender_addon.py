@@ -152,17 +152,30 @@ def test_export_round_trip(tmp_path):
 
 @pytest.mark.parametrize("threads", [1, 2])
 def test_cancel_stops_within_one_batch_and_writes_a_clean_result(threads):
-    """Esc in a 600 s render: the render stops at the next check of test_break, within a batch, with a
-    clean partial result (every pass finite). On one process the first check lets one batch run; on a
-    pool the workers finish the batches in flight and nothing that came later is merged."""
-    res, _ = scenario("cancel", threads)
+    """Esc in a 600 s render, at the first check of test_break after the first batch was merged: the
+    render stops there, with a clean partial result (every pass finite). One process has merged that
+    batch alone; on a pool the batches that ended in the same wait are merged with it (at most one per
+    worker: they started together) and nothing that came later."""
+    res, _ = scenario("cancel", threads, "after_first_batch")
     f = res["figures"]
-    assert f["partial"] is True and f["batches"] <= 1 and f["workers"] == threads
+    assert f["partial"] is True and 1 <= f["batches"] <= threads and f["workers"] == threads
     if threads == 1:
         assert f["batches"] == 1 and res["test_break_calls"] == 2  # one batch ran, the second check stopped it
-    assert res["seconds"] < 30
+    assert res["seconds"] < 30 and res["kept_report"]
     for name, values in res["samples"].items():
         assert values and all(math.isfinite(v) for v in values), name
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_cancel_before_the_first_batch_says_so_and_keeps_no_figures(threads):
+    """Esc before any batch ended: no estimate, so no report and no "no light path found" diagnosis of a
+    scene that has light; an information line says what happened, and the scene's earlier report is
+    dropped (a file Blender writes now must not get an earlier render's report beside it)."""
+    res, _ = scenario("cancel", threads, "at_once")
+    (message,) = res["reports"]
+    assert res["figures"] == res["last_render"] == {"stopped": message[len("HUD Tracer: "):]}
+    assert "before the first batch ended: nothing rendered" in message and "light" not in message
+    assert res["test_break_calls"] == 1 and not res["kept_report"] and res["seconds"] < 30
 
 
 def test_unregister_leaves_nothing_behind_and_the_process_exits():

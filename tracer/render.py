@@ -371,18 +371,27 @@ def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarr
 PUPIL_PILOT_SHARE = 0.05
 
 
+def _check_started(result: RenderResult):
+    """StoppedBeforeFirstBatch for a render that ``should_stop`` ended before any batch was merged."""
+    if result.partial and result.batches == 0:
+        raise StoppedBeforeFirstBatch(f"stopped after {result.seconds:.1f} s, before the first batch ended")
+
+
 def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
     """For an eye whose pupil follows the image (EyeSpec.pupil_from_image): a pilot render of a share
     of the budget (backward tracing of every source: the adaptation luminance is a mean over the image,
     which it finds fast in every scene) gives the adaptation luminance, Watson & Yellott's formula the
     pupil (pupil.py); the integrator is rebuilt for that eye and the budget left is returned with what
-    the pilot found. (Apparent luminance hardly depends on the pupil, so one pilot is enough.)"""
+    the pilot found. (Apparent luminance hardly depends on the pupil, so one pilot is enough.) Raises
+    :class:`~tracer.errors.StoppedBeforeFirstBatch` when ``should_stop`` ends the pilot before its first
+    batch: there is no luminance to adapt to."""
     spec = integrator.eye.spec
     share = Budget(rays=None if budget.rays is None else max(1, int(PUPIL_PILOT_SHARE * budget.rays)),
                    seconds=None if budget.seconds is None else PUPIL_PILOT_SHARE * budget.seconds)
     t0 = time.perf_counter()
     pilot = INTEGRATORS["backward"](integrator.world, integrator.seed + 1)
     first = pilot.render(share, None, should_stop)
+    _check_started(first)
     adapt = adaptation_luminance(luminance(first.film.rgb()), spec.adaptation)
     pupil = pupil_diameter_mm(adapt, age_years=spec.observer_age)
     eye = dataclasses.replace(spec, pupil_diameter_mm=pupil)
@@ -404,8 +413,10 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
     the command line's render and Blender's, with the two callables of the seam (``progress``,
     ``should_stop``) and the optional ``preview(film)`` (tracer.integrators.base.drive). Where the eye's
     pupil follows the image, a pilot finds it first (:func:`_follow_pupil`). Returns the integrator that
-    rendered (rebuilt for that pupil) and the result. Raises FloatingPointError if the estimate holds
-    NaN or Inf (a bug: the estimators never make them)."""
+    rendered (rebuilt for that pupil) and the result. Raises
+    :class:`~tracer.errors.StoppedBeforeFirstBatch` when ``should_stop`` ended the render before its
+    first batch (there is no estimate, and a black image would read as a scene without light), and
+    FloatingPointError if the estimate holds NaN or Inf (a bug: the estimators never make them)."""
     pupil = None
     if integrator.eye.spec.pupil_from_image:
         integrator, budget, pupil = _follow_pupil(integrator, budget, workers, should_stop)
@@ -413,6 +424,7 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
         result = render_parallel(integrator, budget, workers, progress, should_stop, preview)
     else:
         result = integrator.render(budget, progress, should_stop, preview)
+    _check_started(result)
     if pupil is not None:
         result.extra["pupil"] = pupil
     if not (np.all(np.isfinite(result.film.rgb())) and np.all(np.isfinite(result.film.variance_y()))):
@@ -504,8 +516,6 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         world = World(scene)
         integrator = INTEGRATORS[method](world, seed, batch_size)
         integrator, result = run_render(integrator, budget, workers, progress, should_stop)
-        if result.partial and result.batches == 0:
-            raise StoppedBeforeFirstBatch(f"stopped after {result.seconds:.1f} s, before the first batch ended")
         products = render_products(integrator.world, integrator, result, budget, analyse)
         outputs.commit(products.files())
         outputs.keep()
