@@ -128,6 +128,9 @@ def test_a_channel_whose_pilots_find_no_light_is_skipped_with_a_warning_that_say
     said = "hud channel skipped: no pilot found light (backward: "
     assert any(w.startswith(said) for w in res.warnings), res.warnings
     assert not any("environment channel skipped" in w for w in res.warnings)  # skipped by the scene, not by pilots
+    pilots = sum(p["paths"] for p in hud["pilots"])
+    assert any(w.startswith(f"no light path found: hybrid traced 0 paths (0 rays), its pilots {pilots:,} paths (")
+               for w in res.warnings), res.warnings
     assert luminance(res.film.rgb()).max() == 0.0
 
 def _efficiency_of(method: str, folder, seed: int, rays: int) -> tuple[float, np.ndarray, np.ndarray]:

@@ -290,6 +290,10 @@ class Integrator:
         for k, v in batch.items():
             total[k] = total.get(k, 0) + v
 
+    def traced(self, result: RenderResult) -> str:
+        """What the render traced, for its warnings: "<method> traced P paths (R rays)"."""
+        return f"{result.method} traced {result.paths:,} paths ({result.rays:,} rays)"
+
     def finish(self, result: RenderResult):
         """Add method-specific warnings and figures to a finished result."""
         result.extra["roulette"] = {"reference_luminance_cd_m2": self.reference_luminance,
@@ -301,8 +305,7 @@ class Integrator:
                 "environment): the image is black because the scene is dark")
         elif result.found == 0:
             result.warnings.append(
-                f"no light path found: {result.method} traced {result.paths:,} paths ({result.rays:,} rays) and "
-                f"none {self.found_what} (efficiency {result.efficiency:.3g}): the scene has light, so either none "
+                f"no light path found: {self.traced(result)} and none {self.found_what} (efficiency {result.efficiency:.3g}): the scene has light, so either none "
                 "of it reaches the eye or this method cannot find it (try the other method, or more rays)")
         elif result.found < 100:
             result.warnings.append(

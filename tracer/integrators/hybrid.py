@@ -470,6 +470,13 @@ class _Channels(Integrator):
         raise NotImplementedError("channels trace their own batches (trace_batch)")
 
     # -- the report --------------------------------------------------------------------------------
+    def traced(self, result: RenderResult) -> str:
+        """The render's paths and its pilots' (not merged into the image, but traced and searched)."""
+        pilots = [p for c in self.channels for p in c.pilots]
+        paths, rays = sum(p.paths for p in pilots), sum(p.rays for p in pilots)
+        said = super().traced(result)
+        return f"{said}, its pilots {paths:,} paths ({rays:,} rays)," if paths else said
+
     def finish(self, result: RenderResult):
         extra, film = result.extra, result.film
         channels = {}
