@@ -20,6 +20,8 @@ import tracer.sweep as sweep_module
 from presets import analytic_mirror
 from tracer import cli
 from tracer.imageio import read_image
+from tracer.integrators import INTEGRATORS, Budget
+from tracer.render import REPORT_SECTIONS, render_folder
 from tracer.sweep import (
     MAX_RUNS,
     SHADE,
@@ -322,6 +324,10 @@ def no_render(monkeypatch):
     ("require a word", ("--set", f"{PANEL}=1:2:2", "--require", "luminance.mean >= bright"), "VALUE must be a number"),
     ("require nan", ("--set", f"{PANEL}=1:2:2", "--require", "luminance.mean >= nan"), "VALUE must be finite"),
     ("require a bad key", ("--set", f"{PANEL}=1:2:2", "--require", "hud..x >= 1"), "KEY 'hud..x'"),
+    ("require a mistyped section", ("--set", f"{PANEL}=1:2:2", "--require", "lumnance.mean >= 1"),
+     "--require lumnance.mean >= 1: 'lumnance' is not a section of a run's report.json (did you mean 'luminance'?"),
+    ("y of no section", ("--set", f"{PANEL}=1:2:2", "--y", "contrast_ratio"),
+     "--y contrast_ratio: 'contrast_ratio' is not a section of a run's report.json (the sections are: run_id, "),
 ])
 def test_every_refusal_is_one_line_before_any_run_and_writes_nothing(tmp_path, no_render, case, args, message):
     out = tmp_path / "refused"
@@ -358,11 +364,20 @@ def test_requirement_syntax():
     assert q.judge(report) == {"requirement": q.text, "value": 1.3, "met": False,
                                "why": "hud.spot.peak_over_median_background is 1.3"}
     assert q.judge({"hud": None})["why"] == "hud is not a block"
-    assert parse_requirement("x > 1").judge({"x": 1})["met"] is False
-    assert parse_requirement("x >= 1").judge({"x": 1})["met"] is True
+    assert parse_requirement("rays > 1").judge({"rays": 1})["met"] is False
+    assert parse_requirement("rays >= 1").judge({"rays": 1})["met"] is True
     with pytest.raises(SweepArgumentError):
         parse_requirement("x => 1")
     assert str(MAX_RUNS) in cli.build_parser()._subparsers._group_actions[0].choices["sweep"].format_help()
+
+
+@pytest.mark.parametrize("method", sorted(INTEGRATORS))
+def test_every_method_reports_the_sections_that_sweep_keys_are_checked_against(tmp_path, preset, method):
+    """REPORT_SECTIONS is what --y and --require keys are refused against before any ray: every
+    method's report.json has exactly those top-level keys, in that order."""
+    report, _ = render_folder(preset("analytic-mirror"), method, Budget(rays=40_000), 1, tmp_path / "out")
+    assert tuple(report) == REPORT_SECTIONS
+    assert tuple(json.loads((tmp_path / "out" / "report.json").read_text())) == REPORT_SECTIONS
 
 
 def test_ctrl_c_stops_the_current_run_and_writes_the_runs_done_marked_partial(tmp_path, monkeypatch):

@@ -309,6 +309,14 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
     }
 
 
+#: The top-level keys of a render's report.json, in their order (a test checks every method's report
+#: against it): what a sweep's ``--y`` and ``--require`` keys are checked against before any ray.
+REPORT_SECTIONS = ("run_id", "tracer", "scene", "method", "seed", "budget", "partial", "rays", "paths",
+                   "paths_found_light", "batches", "workers", "seconds", "rays_per_second", "efficiency",
+                   "efficiency_definition", "luminance", "components", "replicates", "stage_seconds",
+                   "adaptation_luminance", "adaptation_mode", "noise", "preview", "image", "warnings",
+                   "method_details", "brightness_theorem", "polarisation", "hud")
+
 #: The files of a render, written as a set (tracer.outputs).
 OUTPUT_NAMES = ("image.exr", "preview.png", "report.json")
 

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import difflib
 import io
 import itertools
 import json
@@ -70,7 +71,7 @@ from .errors import SceneError, StoppedBeforeFirstBatch
 from .falsecolour import FONT, GLYPH_H, INK, PAPER, colour_map, draw_text, png_file, text_size, value_label
 from .lights import EMISSION
 from .outputs import STAGING_PREFIX, OutputFile, OutputFolderError, OutputSet, OutputWriteError
-from .render import finite_json, render_scene
+from .render import REPORT_SECTIONS, finite_json, render_scene
 from .scene import SCENE_FILE, Scene, load_scene
 
 #: Most runs a sweep may have: a grid of about 8 x 8 x 8. Each run writes its images (1.5 MB for
@@ -385,6 +386,19 @@ class Requirement:
         return out
 
 
+def check_report_key(argument: str, steps) -> None:
+    """A report key's first name must be a section of every report (tracer.render.REPORT_SECTIONS), so
+    that a mistyped key is refused before the runs rather than found missing in each. (What lies below
+    a section depends on the scene and the method: a run whose report lacks it fails the requirement.)
+    Raises :class:`SweepArgumentError`."""
+    name = steps[0][1]
+    if name not in REPORT_SECTIONS:
+        near = difflib.get_close_matches(name, REPORT_SECTIONS, n=1)
+        hint = f"did you mean {near[0]!r}? " if near else ""
+        raise SweepArgumentError(argument, f"{name!r} is not a section of a run's report.json ({hint}the sections "
+                                           f"are: {', '.join(REPORT_SECTIONS)})")
+
+
 _REQUIREMENT = re.compile(r"\s*(?P<key>[^\s<>=!]+)\s*(?P<op>>=|<=|==|=|!=|>|<)\s*(?P<value>[^\s<>=!]\S*)\s*")
 
 
@@ -402,6 +416,7 @@ def parse_requirement(text: str) -> Requirement:
         steps = parse_field(key, globs=False)
     except ValueError as e:
         raise SweepArgumentError(argument, f"KEY {key!r}: {e}") from None
+    check_report_key(argument, steps)
     try:
         v = float(value)
     except ValueError:
@@ -483,9 +498,10 @@ def check_arguments(sets: list[str], log: list[str], requires: list[str], x: str
         raise SweepArgumentError("--y", f"{len(y)} panels, more than {MAX_PANELS}")
     for key in y:
         try:
-            parse_field(key, globs=False)
+            steps = parse_field(key, globs=False)
         except ValueError as e:
             raise SweepArgumentError(f"--y {key}", str(e)) from None
+        check_report_key(f"--y {key}", steps)
     runs = math.prod(f.n for f in fields)
     if runs > MAX_RUNS:
         sizes = " x ".join(str(f.n) for f in fields)

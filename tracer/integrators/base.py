@@ -305,8 +305,9 @@ class Integrator:
                 "environment): the image is black because the scene is dark")
         elif result.found == 0:
             result.warnings.append(
-                f"no light path found: {self.traced(result)} and none {self.found_what} (efficiency {result.efficiency:.3g}): the scene has light, so either none "
-                "of it reaches the eye or this method cannot find it (try the other method, or more rays)")
+                f"no light path found: {self.traced(result)} and none {self.found_what} (efficiency "
+                f"{result.efficiency:.3g}): the scene has light, so either none of it reaches the eye or this "
+                "method cannot find it (try the other method, or more rays)")
         elif result.found < 100:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
