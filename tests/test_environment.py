@@ -521,6 +521,9 @@ def _sun(**fields):
         (_uniform(luminance=True), "environment.luminance"),
         (_uniform(luminance=float("nan")), "environment.luminance"),
         (_uniform(luminance=None), "environment.luminance"),
+        # positive but below 1e-9 cd/m^2: a black image and no warning before (2026-12-04)
+        (_uniform(luminance=1e-300), "environment.luminance"),
+        (_uniform(luminance=1e-10), "environment.luminance"),
         (_uniform(color=[1, 1]), "environment.color"),
         (_uniform(color="white"), "environment.color"),
         (_uniform(color=[1, -1, 1]), "environment.color[1]"),
@@ -548,6 +551,8 @@ def _sun(**fields):
         (_hdri(calibration={"mode": "min", "value": 0}), "environment.calibration.value"),
         (_hdri(calibration={"mode": "min", "value": 2e12}), "environment.calibration.value"),
         (_hdri(calibration={"mode": "max", "value": "5"}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "scale", "value": 1e-12}), "environment.calibration.value"),
+        (_hdri(calibration={"mode": "max", "value": 1e-10}), "environment.calibration.value"),
         (_hdri(calibration={"mode": "max", "value": 5, "unit": "nit"}),
          "environment.calibration.unit"),
         (_hdri(rotation_deg="90"), "environment.rotation_deg"),
@@ -562,6 +567,7 @@ def _sun(**fields):
         (_sun(illuminance_lux=-1), "environment.sun.illuminance_lux"),
         (_sun(illuminance_lux="100 klx"), "environment.sun.illuminance_lux"),
         (_sun(illuminance_lux=2e12), "environment.sun.illuminance_lux"),
+        (_sun(illuminance_lux=1e-300), "environment.sun.illuminance_lux"),
         (_sun(angular_diameter_deg=0), "environment.sun.angular_diameter_deg"),
         (_sun(angular_diameter_deg=-0.5), "environment.sun.angular_diameter_deg"),
         (_sun(angular_diameter_deg=20.01), "environment.sun.angular_diameter_deg"),
@@ -578,6 +584,15 @@ def test_spec_errors_name_the_field(scene_dir, spec, field):
         environment_from_spec(spec, scene_dir, file="scenes/demo/scene.json")
     assert info.value.field == field
     assert info.value.file == "scenes/demo/scene.json"
+
+
+def test_unknown_names_are_shown_as_json_not_as_python():
+    """A list where a name belongs was echoed as Python's repr (['none'])."""
+    for spec, shown in (({"type": ["none"]}, 'unknown type ["none"] (known: none, uniform, hdri)'),
+                        (_hdri(calibration={"mode": ["mean"], "value": 1}), 'unknown mode ["mean"] (known: scale')):
+        with pytest.raises(SceneError) as info:
+            environment_from_spec(spec, Path("."))
+        assert shown in info.value.message
     assert info.value.message
 
 

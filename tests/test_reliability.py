@@ -626,6 +626,13 @@ TINY_OR_MISTYPED = {
     "transform null": (_set(("objects", 0, "transform"), None), "objects[0].transform"),
     # os functions raise ValueError on a NUL
     "NUL in a mesh path": (_set(("objects", 0, "mesh"), "meshes/mirror.obj\0x"), "objects[0].mesh"),
+    # the review of 2026-12-04: an aperture (not traced) with an emission block was dropped from the
+    # light table without a word ("the scene has no light source" when it was the only one)
+    "emission on an aperture": (_set(("objects", 1, "emission"), {"luminance": 1000.0}), "objects[1].emission"),
+    # every ray to the focused point grazed the pupil plane: black, and the method was blamed
+    "accommodation 0.001 mm": (_set(("eye", "accommodation_distance_mm"), 0.001), "eye.accommodation_distance_mm"),
+    # a black image of exit 0 and a RuntimeWarning from the roulette
+    "environment 1e-300": (_set(("environment",), {"type": "uniform", "luminance": 1e-300}), "environment.luminance"),
 }
 
 
@@ -655,6 +662,17 @@ def test_obj_index_zero_and_non_finite_texture_coordinates_are_refused(mirror, e
     (mirror / "meshes" / "mirror.obj").write_text(text)
     code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
     assert_one_line_error(code, err, "scene.json", "objects[0].mesh", "meshes/mirror.obj", words)
+    assert hashes(out) == before
+
+
+def test_a_mesh_of_a_format_the_tracer_does_not_read_is_named_so(mirror, earlier):
+    """trimesh read an OBJ named .xyz as a point cloud and failed on its 'v' ("could not convert string
+    to float"); the suffix decides the format, so the message says which suffixes are read."""
+    out, before = earlier
+    (mirror / "meshes" / "mirror.obj").rename(mirror / "meshes" / "mirror.xyz")
+    edit_json(mirror, _set(("objects", 0, "mesh"), "meshes/mirror.xyz"))
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", "objects[0].mesh", "meshes/mirror.xyz", ".obj, .ply")
     assert hashes(out) == before
 
 

@@ -32,6 +32,7 @@ reads, samples or weighs an environment sees the sun without knowing of it.
 
 from __future__ import annotations
 
+import json
 import math
 from abc import ABC, abstractmethod
 from pathlib import Path
@@ -42,7 +43,7 @@ from .errors import ImageReadError, SceneError
 from .imageio import read_image
 from .sampling import Distribution1D, frame_from_normal, to_world, uniform_sphere
 from .units import luminance, normalize_color
-from .validate import MAX_ABS, MAX_LUMINANCE, FieldChecker
+from .validate import MAX_ABS, MAX_LUMINANCE, MIN_LUMINANCE, FieldChecker
 from .vec import dot, norm
 
 #: Calibration modes of :class:`HdriEnvironment`.
@@ -640,6 +641,10 @@ def _sun_from_spec(ck: FieldChecker, spec) -> Sun:
         ck.fail("environment.sun", f"illuminance_lux {e:g} over a disk of {diameter:g} deg gives it a luminance of "
                                    f"{sun.luminance_cd_m2:.3g} cd/m^2 (E / (pi sin^2(diameter / 2))), above "
                                    f"{MAX_LUMINANCE:g}: give a larger angular_diameter_deg or a smaller illuminance")
+    if 0 < sun.luminance_cd_m2 < MIN_LUMINANCE:
+        ck.fail("environment.sun.illuminance_lux", f"{e:.3g} lx gives the sun's disk a luminance of "
+                                                   f"{sun.luminance_cd_m2:.3g} cd/m^2, below {MIN_LUMINANCE:g} "
+                                                   "(give 0 for no sun)")
     return sun
 
 
@@ -698,7 +703,7 @@ def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
         ck.fail("environment.type", "missing required field")
     kind = spec["type"]
     if not isinstance(kind, str) or kind not in _FIELDS:
-        ck.fail("environment.type", f"unknown type {kind!r}; expected one of {list(_FIELDS)}")
+        ck.fail("environment.type", f"unknown type {json.dumps(kind)[:40]} (known: {', '.join(_FIELDS)})")
     ck.keys(spec, "environment", _REQUIRED[kind] | {"type"}, _FIELDS[kind] - _REQUIRED[kind])
     sun = _sun_from_spec(ck, spec["sun"]) if "sun" in spec else None
     base = _base_from_spec(ck, kind, spec, scene_dir, file)
@@ -712,6 +717,8 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
 
     if kind == "uniform":
         L = ck.number(spec["luminance"], "environment.luminance", min_value=0.0, max_value=MAX_LUMINANCE)
+        if 0 < L < MIN_LUMINANCE:
+            ck.fail("environment.luminance", f"{L:.3g} cd/m^2 is below {MIN_LUMINANCE:g} (give 0 for no light)")
         rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.color", max_value=None)
         if rgb.max() == 0.0:
             ck.fail("environment.color", "must not be black")
@@ -722,7 +729,8 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
     ck.keys(cal, "environment.calibration", {"mode", "value"}, set())
     mode = cal["mode"]
     if not isinstance(mode, str) or mode not in CALIBRATION_MODES:
-        ck.fail("environment.calibration.mode", f"unknown value {mode!r}; expected one of {list(CALIBRATION_MODES)}")
+        ck.fail("environment.calibration.mode", f"unknown mode {json.dumps(mode)[:40]} (known: "
+                                                f"{', '.join(CALIBRATION_MODES)})")
     limit = MAX_ABS if mode == "scale" else MAX_LUMINANCE
     value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True,
                       max_value=limit)
@@ -739,4 +747,7 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
     if not env.max_luminance <= MAX_LUMINANCE:
         ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "
                                                  f"cd/m^2, above {MAX_LUMINANCE:g}")
+    if 0 < env.max_luminance < MIN_LUMINANCE:
+        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "
+                                                 f"cd/m^2, below {MIN_LUMINANCE:g}")
     return env

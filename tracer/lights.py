@@ -32,7 +32,7 @@ import numpy as np
 from .sampling import Distribution1D, TriangleSet
 from .schema import Field, Schema
 from .units import MM2_TO_M2, lambertian_luminance_cd_m2, luminance, normalize_color
-from .validate import MAX_FLUX, MAX_LUMINANCE
+from .validate import MAX_FLUX, MAX_LUMINANCE, MIN_LUMINANCE
 from .vec import F32, dot, norm, take
 
 #: Importance-driven cluster choice is used up to this many emitting objects (beyond it, power alone).
@@ -41,9 +41,6 @@ MAX_CLUSTERS = 32
 DEFENSIVE = 0.1
 
 
-#: The smallest positive luminance of an emitter, cd/m^2: a thousandth of the eye's absolute threshold
-#: (about 1e-6); below it the float32 path weights of a few optical events underflow to zero.
-MIN_LUMINANCE = 1e-9
 
 
 def _emission_check(params: dict, fail):

@@ -87,6 +87,7 @@ class OutputSet:
         wherever it is copied or zipped)."""
         #: An empty name would be Path("."), the working directory: refused by :meth:`open`.
         self._empty = isinstance(folder, str) and not folder.strip()
+        self._given = folder
         self.folder = Path(folder)
         self.scene_root = None if scene_root is None else Path(scene_root)
         self.names = tuple(names)
@@ -98,7 +99,8 @@ class OutputSet:
         """Check and lock the folder (creating it, and missing parents, if needed)."""
         folder = self.folder
         if self._empty:
-            raise OutputFolderError("''", "an empty folder name; give the output folder (\".\" for this one)")
+            what = "an empty folder name" if not self._given else "a folder name of blanks only"
+            raise OutputFolderError(repr(self._given), f"{what}; give the output folder (\".\" for this one)")
         if "\0" in str(folder):
             raise OutputFolderError(folder, "a folder name must not contain a NUL character")
         try:

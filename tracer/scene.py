@@ -69,7 +69,7 @@ import numpy as np
 
 from .environment import Environment, environment_from_spec
 from .errors import SceneError
-from .lights import EMISSION, MIN_LUMINANCE, Emission, make_emission
+from .lights import EMISSION, Emission, make_emission
 from .optics.materials import MATERIALS
 from .pupil import pupil_diameter_mm
 from .schema import Field, fail_in, parse_block
@@ -82,6 +82,8 @@ from .validate import (
     MAX_PIXELS,
     MAX_PUPIL_MM,
     MAX_SCALE,
+    MIN_DISTANCE_MM,
+    MIN_LUMINANCE,
     MIN_PUPIL_MM,
     MIN_SCALE,
     FieldChecker,
@@ -371,8 +373,13 @@ def _check_obj_indices(ck: FieldChecker, path: Path, rel: str, fld: str):
         ck.fail(fld, f"cannot read mesh {rel}: line {line}: a face refers to element 0 (OBJ counts from 1)")
 
 
+#: The mesh formats scene.json may name (trimesh reads them; it also guesses at others, and reads a
+#: point cloud or a text file of numbers as a mesh of no faces or of garbage).
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
 def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
-    """(vertices (v,3), faces (f,3), uv (v,2) or None) from PLY/OBJ/GLB through trimesh."""
+    """(vertices (v,3), faces (f,3), uv (v,2) or None) from OBJ, PLY, STL, OFF or glTF through trimesh."""
     import trimesh
 
     path = ck.path(root, rel, fld)
@@ -382,6 +389,9 @@ def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
         ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
     if not found:
         ck.fail(fld, f"mesh file not found: {rel}")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        ck.fail(fld, f"{rel}: not a mesh format the tracer reads (a file name ending in "
+                     f"{', '.join(MESH_SUFFIXES)})")
     if path.suffix.lower() == ".obj":
         _check_obj_indices(ck, path, rel, fld)
     try:
@@ -546,7 +556,7 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     if acc_raw == "infinity":
         acc = math.inf
     else:
-        acc = ck.number(acc_raw, "eye.accommodation_distance_mm", min_value=0.0, min_exclusive=True,
+        acc = ck.number(acc_raw, "eye.accommodation_distance_mm", min_value=MIN_DISTANCE_MM,
                         max_value=MAX_DISTANCE_MM)
     res = spec["resolution"]
     if (not isinstance(res, list) or len(res) != 2
@@ -648,6 +658,9 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             if emission is not None:
                 ck.fail(f"{fld}.emission", 'an "emitter" material already emits: give the emission once')
             emission, emission_aim = _emission(ck, o["emission"], f"{fld}.emission")
+            if not MATERIALS[mat.type].traced:
+                ck.fail(f"{fld}.emission", f"material {mat.type} is not traced (rays pass through it), so it cannot emit: "
+                                           "give the emission to a surface (an absorber for a bare source)")
         files += [v for k, v in mat.params.items() if k.endswith("_file")]
         rel = ck.string(o["mesh"], f"{fld}.mesh")
         files.append(rel)

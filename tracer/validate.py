@@ -22,6 +22,10 @@ from .errors import SceneError
 MAX_ABS = 1e15
 #: Largest luminance, cd/m^2: a thousand times the sun's disk (1.6e9).
 MAX_LUMINANCE = 1e12
+#: The smallest positive luminance of a light (an emitter, the environment, the sun's disk), cd/m^2: a
+#: thousandth of the eye's absolute threshold (about 1e-6); below it the float32 path weights of a few
+#: optical events underflow to zero and the image would come out black without a warning.
+MIN_LUMINANCE = 1e-9
 #: Largest luminous flux of one object, lm (a stadium's floodlights are about 1e8).
 MAX_FLUX = 1e10
 #: Every position (eye, translations, mesh vertices in the world) lies within this distance of the
@@ -37,6 +41,10 @@ MIN_PUPIL_MM, MAX_PUPIL_MM = 0.01, 20.0
 MAX_FOCAL_MM = 1000.0
 #: Largest accommodation distance, mm (beyond it, give "infinity").
 MAX_DISTANCE_MM = 1e12
+#: Nearest accommodation distance, mm: 100 dioptres, seven times the accommodation of the youngest eye
+#: (about 14 D at age 10; Duane 1922, doi:10.1001/archopht.1922.00830020010002). Nearer than the pupil's
+#: radius the rays to the focused point graze the pupil plane and every pixel's extent vanishes.
+MIN_DISTANCE_MM = 10.0
 #: Most retina pixels (4096 x 4096).
 MAX_PIXELS = 1 << 24
 #: Memory a render takes per retina pixel and process, bytes (film sums, a batch's film, the image, its
