@@ -1,6 +1,7 @@
 """hud-render: render a saved .blend headless with the bpy module.
 
-    hud-render FILE.blend --out DIR [--method backward|forward] [--seconds S | --rays N] [--seed K]
+    hud-render FILE.blend --out DIR [--method auto|backward|forward|hybrid|photon] [--seconds S | --rays N]
+               [--seed K]
 
 The add-on is enabled from this source tree through a temporary local extension repository (Blender
 disables it at exit, so the bpy module does not hang), the file is opened, its HUD settings are
@@ -54,12 +55,14 @@ def enable_from_source(bpy, tmp: Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     from tracer.allocator import keep_freed_memory
+    from tracer.cli import Parser
+    from tracer.integrators import INTEGRATORS
 
     keep_freed_memory()  # this process exists to render (see tracer/allocator.py)
-    ap = argparse.ArgumentParser(prog="hud-render", description="Render a .blend with the HUD Tracer engine.")
+    ap = Parser(prog="hud-render", description="Render a .blend with the HUD Tracer engine.")
     ap.add_argument("blend")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--method")
+    ap.add_argument("--method", choices=sorted(INTEGRATORS), help="the method (default: the .blend's)")
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--seconds", type=float)
     group.add_argument("--rays", type=int)

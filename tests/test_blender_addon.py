@@ -229,23 +229,24 @@ def test_hud_render_names_the_world_image_that_lost_its_pixels(tmp_path):
     assert not out.exists() or list(out.iterdir()) == []
 
 
-@pytest.mark.parametrize("case", ["--out is a file", "--seconds nan"])
+@pytest.mark.parametrize("case", ["--out is a file", "--seconds nan", "--method backwards"])
 def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
     """hud-render checks its arguments and locks its output folder first (issue 9): one line, exit 2,
-    and the .blend is not even opened (it does not exist here: the refusal comes before)."""
+    and the .blend is not even opened (it does not exist here: the refusal comes before). A misspelt
+    method was Blender's enum traceback."""
     out = tmp_path / "out"
     args = ["--rays", "1000"]
     if case == "--out is a file":
         out.write_text("x")
     else:
-        args = ["--seconds", "nan"]
+        args = case.split()
     blend = tmp_path / "scene.blend"
     blend.write_bytes(b"BLENDER")
     proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), *args],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and ("--seconds" in lines[0] or str(out) in lines[0])
+    assert len(lines) == 1 and lines[0].startswith("error: ") and (case.split()[0] in lines[0] or str(out) in lines[0])
 
 
 def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
