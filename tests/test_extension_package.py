@@ -104,3 +104,41 @@ def test_the_oldest_bpy_lock_is_requirements_lock_with_the_manifests_oldest_bpy(
     assert differ == {}, f"requirements-bpy42.lock: pins that differ from requirements.lock: {differ}"
     needed = {"numpy", "embreex", "trimesh", "openimageio", "pytest", "setuptools"}
     assert needed <= oldest.keys(), f"requirements-bpy42.lock: missing {sorted(needed - oldest.keys())}"
+
+
+def test_the_build_packs_a_staging_copy_of_the_add_on_only(tmp_path):
+    """Blender's tool packs its whole source folder but for the manifest's patterns: a scene.blend and an
+    exported scenes/ folder in the checkout (hud-render's and hud-trace export's own README examples)
+    shipped in every zip. tools/build_extension.py stages the add-on's entries and listed wheels alone."""
+    import importlib.util
+    import shutil
+
+    spec = importlib.util.spec_from_file_location("build_extension", ROOT / "tools" / "build_extension.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    root = tmp_path / "checkout"
+    root.mkdir()
+    for name in build.SHIPPED:
+        source = ROOT / name
+        if source.is_dir():
+            (root / name / "sub").mkdir(parents=True)
+            (root / name / "module.py").write_text("x = 1\n")
+            (root / name / "__pycache__").mkdir()
+            (root / name / "__pycache__" / "module.cpython-311.pyc").write_bytes(b"\0")
+        else:
+            shutil.copy2(source, root / name)
+    (root / "wheels").mkdir()
+    for wheel in MANIFEST["wheels"] + ["./wheels/numpy-1.26.4-cp311-cp311-win_amd64.whl"]:
+        (root / wheel).write_bytes(b"PK")
+    (root / "scene.blend").write_bytes(b"BLENDER")
+    (root / "scenes" / "hd").mkdir(parents=True)
+    (root / "scenes" / "hd" / "scene.json").write_text("{}")
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    build.stage_sources(root, MANIFEST, staging)
+    found = {p.relative_to(staging).as_posix() for p in staging.rglob("*") if p.is_file()}
+    wheels = {w.removeprefix("./") for w in MANIFEST["wheels"]}
+    code = {f"{name}/module.py" for name in build.SHIPPED if (ROOT / name).is_dir()}
+    files = {name for name in build.SHIPPED if (ROOT / name).is_file()}
+    assert found == code | files | wheels, sorted(found ^ (code | files | wheels))
+    assert {"blender_manifest.toml", "__init__.py", "LICENSE"} <= files

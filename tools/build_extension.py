@@ -7,8 +7,14 @@ the tests check the zips that `make extension` makes. It runs tools/fetch_wheels
 into wheels/), then Blender's own extension tool, blender_ext.py (shipped inside the bpy package; by
 default the one of the bpy installed beside this Python):
 
-    blender_ext.py build --split-platforms --source-dir <root> --output-dir <dir>
+    blender_ext.py build --split-platforms --source-dir <staging copy> --output-dir <dir>
     blender_ext.py validate <zip>                      (for every zip the build made)
+
+Blender's tool packs every file of its source folder that the manifest's ``paths_exclude_pattern`` does
+not exclude, so a user's own files in the checkout (a scene.blend, a scenes/ folder of exports) would
+ship too. The build therefore runs on a staging copy of only what the add-on is made of
+(:data:`SHIPPED`: the manifest, __init__.py, LICENSE, tracer/, hud_addon/, presets/ and the wheels the
+manifest lists), from which the manifest's patterns still drop caches and the Dask driver.
 
 ``--split-platforms`` makes one zip per platform of the manifest, named
 ``<id>-<version>-<platform, "-" as "_">.zip`` (hud_tracer-0.1.0-linux_x64.zip, ...), each carrying the
@@ -22,13 +28,32 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import shutil
 import subprocess
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = ROOT / "blender_manifest.toml"
+#: What the extension is made of: the only entries of the checkout's root that the build sees.
+SHIPPED = ("blender_manifest.toml", "__init__.py", "LICENSE", "tracer", "hud_addon", "presets")
+
+
+def stage_sources(root: Path, manifest: dict, staging: Path) -> None:
+    """Copy :data:`SHIPPED` and the wheels ``manifest`` lists from ``root`` into ``staging`` (caches left
+    out), the source folder Blender's tool packs."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for name in SHIPPED:
+        source = root / name
+        if source.is_dir():
+            shutil.copytree(source, staging / name, ignore=ignore)
+        else:
+            shutil.copy2(source, staging / name)
+    (staging / "wheels").mkdir()
+    for wheel in manifest.get("wheels", []):
+        shutil.copy2(root / wheel, staging / wheel)
 
 
 def find_blender_ext() -> Path:
@@ -65,8 +90,10 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob(f"{manifest['id']}-{manifest['version']}*.zip"):
         stale.unlink()
-    build = subprocess.run([sys.executable, str(blender_ext), "build", "--split-platforms",
-                            "--source-dir", str(ROOT), "--output-dir", str(out)], capture_output=True, text=True)
+    with tempfile.TemporaryDirectory(prefix="hud-extension-") as staging:
+        stage_sources(ROOT, manifest, Path(staging))
+        build = subprocess.run([sys.executable, str(blender_ext), "build", "--split-platforms",
+                                "--source-dir", staging, "--output-dir", str(out)], capture_output=True, text=True)
     if build.returncode != 0:
         print(f"{blender_ext} build failed:\n{build.stdout}{build.stderr}", file=sys.stderr)
         return 1
