@@ -16,7 +16,7 @@ distribution, each with a shadow ray. Connections and the paths' own hits of the
 combined by multiple importance sampling with the power heuristic (Veach 1997, ch. 9,
 doi:10.5555/927297), so every light path is counted once. A specular surface between the vertex and
 the light blocks the connection: light that reaches a diffuse surface only through glass is left to
-the paths' own hits (and to the photon maps of a later release). With ``next_event: false`` the
+the paths' own hits (or to the photon method's maps, tracer.integrators.photon). With ``next_event: false`` the
 method is the paper's plain backward tracing.
 
 Eq. (3) stratification: the scene may designate an exit pupil, a disk P in the pupil plane. A share

@@ -89,7 +89,7 @@ class ForwardTracer(Integrator, PathMethod):
                                  "from: the image stays black; render it with the backward method")
         elif not w.environment.is_black:
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
-                                 "method (the hybrid method of a later release merges both)")
+                                 "method, or with the hybrid method, which adds it to this method's HUD channel")
         self.particles = Particles(w)
         self.min_extent = float(self.eye.extent.min())
         #: Particles on the retina per particle emitted in the pilot (tracer.integrators.base).
