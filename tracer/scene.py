@@ -659,8 +659,8 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
                 ck.fail(f"{fld}.emission", 'an "emitter" material already emits: give the emission once')
             emission, emission_aim = _emission(ck, o["emission"], f"{fld}.emission")
             if not MATERIALS[mat.type].traced:
-                ck.fail(f"{fld}.emission", f"material {mat.type} is not traced (rays pass through it), so it cannot emit: "
-                                           "give the emission to a surface (an absorber for a bare source)")
+                ck.fail(f"{fld}.emission", f"material {mat.type} is not traced (rays pass through it), so it cannot "
+                                           "emit: give the emission to a surface (an absorber for a bare source)")
         files += [v for k, v in mat.params.items() if k.endswith("_file")]
         rel = ck.string(o["mesh"], f"{fld}.mesh")
         files.append(rel)
