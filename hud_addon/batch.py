@@ -55,7 +55,7 @@ def enable_from_source(bpy, tmp: Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     from tracer.allocator import keep_freed_memory
-    from tracer.cli import Parser
+    from tracer.cli import Parser, ray_count
     from tracer.integrators import INTEGRATORS
 
     keep_freed_memory()  # this process exists to render (see tracer/allocator.py)
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", choices=sorted(INTEGRATORS), help="the method (default: the .blend's)")
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--seconds", type=float)
-    group.add_argument("--rays", type=int)
+    group.add_argument("--rays", type=ray_count)
     ap.add_argument("--seed", type=int)
     args = ap.parse_args(argv)
     from tracer.cli import ArgumentError, check_render_args

@@ -12,6 +12,7 @@ import pytest
 from conftest import ROOT, edit_json, render
 
 from tracer.imageio import read_exr_channels
+from tracer.scene import MESH_SUFFIXES
 
 
 def hud_trace(*args):
@@ -26,6 +27,8 @@ def test_presets_listed_and_exported(tmp_path):
     assert names == ["hud-direct", "hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser", "hud-screen-day",
                      "hud-screen-night", "hud-direct-env", "hud-direct-s", "hud-direct-s-sunglasses",
                      "hud-direct-film-sunglasses", "analytic-mirror", "analytic-disk", "analytic-furnace"]
+    columns = {len(line) - len(line[len(name):].lstrip()) for name, line in zip(names, out.stdout.splitlines(), strict=True)}
+    assert len(columns) == 1, "every summary starts in one column"
     for name in ("hud-direct", "hud-screen", "hud-direct-condenser"):
         assert hud_trace("export", name, tmp_path / name).returncode == 0
         assert (tmp_path / name / "scene.json").is_file() and (tmp_path / name / "textures" / "slide.png").is_file()
@@ -144,9 +147,10 @@ def test_ctrl_c_writes_a_partial_result(tmp_path):
     assert attrs["hud:partial"] == 1 and all(np.all(np.isfinite(c)) for c in ch.values())
 
 
-@pytest.mark.parametrize("ext", ["ply", "glb"])
-def test_meshes_load_from_ply_and_glb(preset, ext):
-    """The mirror of analytic-mirror, re-saved as PLY or GLB, renders the same closed-form value."""
+@pytest.mark.parametrize("ext", [s.removeprefix(".") for s in MESH_SUFFIXES if s != ".obj"])
+def test_meshes_load_from_every_format_the_scene_format_names(preset, ext):
+    """The mirror of analytic-mirror, re-saved as PLY, STL, OFF, GLB or glTF (tracer.scene.MESH_SUFFIXES
+    but OBJ, the presets' own), renders the same closed-form value."""
     import trimesh
 
     from tracer.scene import load_scene
@@ -300,3 +304,19 @@ def test_external_files_are_allowed_in_the_workers_too(preset, tmp_path):
     edit_json(folder, lambda d: [o.update(mesh=str(outside / Path(o["mesh"]).name)) for o in d["objects"]])
     assert main(["render", str(folder), "--rays", "200000", "--workers", "2", "--out", str(tmp_path / "o"),
                  "--quiet", "--allow-external-files"]) == 0
+
+
+@pytest.mark.parametrize("text,value", [("5000000", 5_000_000), ("5e6", 5_000_000), ("5_000_000", 5_000_000),
+                                        ("2.5e5", 250_000), ("2.5e-5", None), ("1.5", None), ("inf", None),
+                                        ("nan", None), ("lots", None)])
+def test_a_ray_budget_may_be_written_as_a_whole_number_in_any_notation(text, value):
+    """--rays 5e6 was "invalid int value" although 1e8 is how the README and the benchmarks write it."""
+    import argparse
+
+    from tracer.cli import ray_count
+
+    if value is None:
+        with pytest.raises(argparse.ArgumentTypeError, match="number of rays"):
+            ray_count(text)
+    else:
+        assert ray_count(text) == value and isinstance(ray_count(text), int)

@@ -227,8 +227,9 @@ def cmd_render(args) -> int:
 def cmd_presets(args) -> int:
     from presets import PRESETS
 
+    width = max(map(len, PRESETS))
     for name, mod in PRESETS.items():
-        print(f"{name:18s} {mod.SUMMARY}")
+        print(f"{name:{width}s}  {mod.SUMMARY}")
     return 0
 
 
@@ -479,6 +480,21 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def ray_count(text: str) -> int:
+    """A --rays value: an integer, also written as 5e6 or 5_000_000 (a whole number)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of rays, got {text!r}") from None
+    if not math.isfinite(value) or value != math.floor(value):
+        raise argparse.ArgumentTypeError(f"expected a whole number of rays, got {text!r}")
+    return int(value)
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
 
@@ -497,7 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--method", choices=sorted(INTEGRATORS), default=DEFAULT_METHOD,
                    help=f"light-transport method (default {DEFAULT_METHOD})")
     b = r.add_mutually_exclusive_group(required=True)
-    b.add_argument("--rays", type=int, help="budget in traced ray segments")
+    b.add_argument("--rays", type=ray_count, help="budget in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--out", required=True, help="output folder (image.exr, preview.png, report.json)")
@@ -564,7 +580,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--method", choices=sorted(INTEGRATORS), default=DEFAULT_METHOD,
                    help=f"light-transport method (default {DEFAULT_METHOD})")
     b = w.add_mutually_exclusive_group(required=True)
-    b.add_argument("--rays", type=int, help="budget of each run in traced ray segments")
+    b.add_argument("--rays", type=ray_count, help="budget of each run in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float, help="budget of each run in wall-clock seconds")
     w.add_argument("--seed", type=int, default=0, help="the seed of every run (default 0)")
     w.add_argument("--workers", type=int, default=available_cpus(),
