@@ -27,7 +27,8 @@ def test_presets_listed_and_exported(tmp_path):
     assert names == ["hud-direct", "hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser", "hud-screen-day",
                      "hud-screen-night", "hud-direct-env", "hud-direct-s", "hud-direct-s-sunglasses",
                      "hud-direct-film-sunglasses", "analytic-mirror", "analytic-disk", "analytic-furnace"]
-    columns = {len(line) - len(line[len(name):].lstrip()) for name, line in zip(names, out.stdout.splitlines(), strict=True)}
+    lines = out.stdout.splitlines()
+    columns = {len(line) - len(line[len(name):].lstrip()) for name, line in zip(names, lines, strict=True)}
     assert len(columns) == 1, "every summary starts in one column"
     for name in ("hud-direct", "hud-screen", "hud-direct-condenser"):
         assert hud_trace("export", name, tmp_path / name).returncode == 0
