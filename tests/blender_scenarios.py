@@ -701,14 +701,6 @@ def scenario_study_preset(out, preset):
             "adaptation_mode": report["adaptation_mode"]}
 
 
-def scenario_save_blend(path, preset):
-    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
-    bpy.ops.hud.add_preset(preset=preset)
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    disable(module)
-    return {"saved": path}
-
-
 def scenario_sun(out):
     """A Sun light as the environment's sun: a 4 m Lambertian floor seen from 0.5 m above; a Sun light
     turned 60 deg about x (it shines along its -Z: toward +y and down, so the sun stands 30 deg high

@@ -186,8 +186,14 @@ def test_unregister_leaves_nothing_behind_and_the_process_exits():
 
 
 def test_hud_render_renders_a_saved_blend(tmp_path):
+    """The .blend comes from tools/preset_blend.py, the README's headless way to make one."""
     blend = tmp_path / "mirror.blend"
-    scenario("save_blend", blend, "analytic-mirror")
+    made = subprocess.run([sys.executable, str(ROOT / "tools" / "preset_blend.py"), "analytic-mirror", str(blend)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert made.returncode == 0 and blend.is_file(), made.stderr[-3000:]
+    again = subprocess.run([sys.executable, str(ROOT / "tools" / "preset_blend.py"), "analytic-mirror", str(blend)],
+                           capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert again.returncode == 2 and "exists" in again.stderr and len(again.stderr.strip().splitlines()) == 1
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), "--rays", "600000",
                            "--method", "backward", "--seed", "2"], capture_output=True, text=True, timeout=600,
