@@ -267,7 +267,10 @@ class Transport:
         axis, (m0, m1) = self.analyser
         c2, s2 = rotation(extra["frame"], axis_frame(axis, d), d)
         s1 = c2 * extra["stokes"][0] + s2 * extra["stokes"][1]
-        return beta * (m0 + m1 * s1)
+        # A physical state has |s1| <= 1, so the factor is >= t_across >= 0; float32 rounding over a
+        # path's interactions takes fully polarised light a little past 1 (1e-5 after the windshield),
+        # which a crossed analyser (t_across 0) turned into negative pixels. Clamped as scatter clamps.
+        return beta * np.maximum(m0 + m1 * s1, 0)
 
     def emitted(self, beta: np.ndarray, extra: dict, d: np.ndarray, slot: np.ndarray) -> np.ndarray:
         """The factor (3, n) that replaces ``beta`` when camera paths (row vectors) arriving along ``d``
@@ -278,7 +281,7 @@ class Transport:
         degree = self.emit_degree[slot]
         k = -d  # the light travels toward the eye
         c2, s2 = rotation(extra["frame"], axis_frame(take(self.emit_axis, slot), k), k)
-        return beta * (1 + degree * (c2 * extra["stokes"][0] + s2 * extra["stokes"][1]))
+        return beta * np.maximum(1 + degree * (c2 * extra["stokes"][0] + s2 * extra["stokes"][1]), 0)
 
     # -- interactions ----------------------------------------------------------------------------
     def scatter(self, beta: np.ndarray, extra: dict, it, bsdf, wo: np.ndarray, weight, flags: np.ndarray,
