@@ -232,7 +232,7 @@ def test_a_large_light_close_to_a_screen_keeps_the_fine_quadrature(tmp_path):
 def test_readouts_give_the_reports_figures(preset, tmp_path):
     """The HUD Readouts panel's rows (tracer.hudfigures.readouts) state the report's own numbers."""
     from tracer.hudfigures import readouts
-    from tracer.integrators import INTEGRATORS, Budget
+    from tracer.integrators import Budget
     from tracer.render import render_scene
     from tracer.scene import load_scene
 
