@@ -110,12 +110,13 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
             continue
         ratio, sigma = entry["rendered_over_predicted"], entry["rendered_minus_predicted_sigma"]
         if ratio < 1 - MISSING_SHARE and sigma < -MISSING_SIGMA:
-            advice = (" (an emitter's aim that optics bend away from its target: aim at the target's image through "
-                      "them, or render with the backward method)" if method in ("forward", "photon") else "")
+            advice = (": light outside an emitter's aim (glass or a lens between it and its target bends the aimed "
+                      "light off it) or high-order ghosts; render with the backward method, whose connections find "
+                      "it, or aim at the target's image through the optics" if method in ("forward", "photon") else "")
             out.append(f"the {key} section renders {ratio:.3g} of the brightness-theorem prediction "
                        f"({entry['rendered_cd_m2']:.4g} against {entry['predicted_cd_m2']:.4g} cd/m^2, "
                        f"{-sigma:.3g} combined standard errors below it): the render misses light that reaches the "
-                       f"eye through specular optics, and its error bars cannot show it{advice}")
+                       f"eye through specular optics in paths too rare for its error bars to show{advice}")
     return out
 
 
