@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..accel import OFFSET_SCALE
-from ..optics.bsdf import DELTA, IMPORTANCE
+from ..optics.bsdf import DELTA, IMPORTANCE, adjoint_shading_factor
 from ..units import luminance3
 from ..vec import F32, max3, norm, put, take
 
@@ -360,6 +360,8 @@ def continue_by_sampling(state: PathState, it, sampler, ctx, mode, nxt: Next, sl
         put(nxt.extra["frame"], sl, frame)
     else:
         beta = state.beta * s.weight
+    if mode == IMPORTANCE and it.ns is not it.ng:  # smoothed surfaces: the adjoint of the camera paths' law
+        beta = beta * adjoint_shading_factor(it, s.wo)
     put(nxt.beta, sl, beta)
     put(nxt.d, sl, s.wo)
     put(nxt.o, sl, ctx.world.accel.spawn(it.p, it.ng, s.wo, it.offset))

@@ -14,7 +14,8 @@ Rendering", 4th ed., ch. 9; Jakob et al., Mitsuba 3, ``mitsuba/core/bsdf.h``), e
 Directions follow the path: ``it.d`` is the propagation direction of the arriving ray, ``wo`` the one
 of the ray that leaves. Transport modes (Veach 1997, ch. 5, "non-symmetric scattering"): camera
 paths carry radiance (``RADIANCE``), light paths carry flux (``IMPORTANCE``); only refraction differs
-(radiance crossing into a denser medium is scaled by (n_i / n_t)^2 on camera paths only).
+(radiance crossing into a denser medium is scaled by (n_i / n_t)^2 on camera paths only), and, on
+smoothed surfaces, the path loop multiplies light paths by :func:`adjoint_shading_factor`.
 
 One material instance serves every object of its type in a world (shading is grouped by material,
 not by object); per-object parameters live in small tables indexed by ``it.slot``.
@@ -31,6 +32,19 @@ from .polar import DEPOLARISE, Mueller
 
 #: Transport modes.
 RADIANCE, IMPORTANCE = "radiance", "importance"
+
+
+def adjoint_shading_factor(it, wo: np.ndarray) -> np.ndarray:
+    """(n,) the factor that makes a light path's scattering at shading normals the adjoint of a camera
+    path's (Veach 1997, sec. 5.3, eq. 5.19, doi:10.5555/927297; pbrt-v3's CorrectShadingNormal):
+    |d . ns| |wo . ng| / (|d . ng| |wo . ns|), ``d`` the arriving direction and ``wo`` the one sampled.
+    Materials weigh samples by cosines to the shading normal in both modes, which is right for
+    radiance; flux crosses the real (geometric) surface, and without the factor forward tracing through
+    a smoothed mirror or lens disagrees with backward tracing. 1 where ns is ng (bit for bit: the same
+    two products), 0 where a direction grazes the geometric surface."""
+    num = np.abs(dot(it.d, it.ns)) * np.abs(dot(wo, it.ng))
+    den = np.abs(dot(it.d, it.ng)) * np.abs(dot(wo, it.ns))
+    return np.where(den > 0, num / np.where(den > 0, den, 1), 0).astype(F32)
 
 #: Lobe flags (bits of ``BSDFSample.flags`` and ``BSDF.flags``).
 DELTA, REFLECTION, TRANSMISSION = 1, 2, 4
