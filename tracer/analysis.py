@@ -97,6 +97,11 @@ class ChiefRays(PathMethod):
         self.names = {0: ()}
         self.codes: dict[tuple, int] = {(): 0}
         self.leaves: dict[int, list] = defaultdict(list)
+        #: Where chains end on a light or a scattering surface, for :func:`aim_coverage`: (kind
+        #: "emission" or "material", object slots (m,), points (3, m), directions toward the eye (3, m),
+        #: weight (m,): the luminance an emitter sends along the chain, the chain's transfer factor
+        #: at a scattering surface, which may be lit through optics the analysis does not follow).
+        self.ends: list[tuple] = []
 
     def _code(self, parent: np.ndarray, labels: list[str], which: np.ndarray | None = None) -> np.ndarray:
         """Chain codes (m,) of chains ``parent`` (m,) extended by ``labels[which]`` (one label for all
@@ -139,7 +144,9 @@ class ChiefRays(PathMethod):
         beta = state.beta
         if self.world.polar is not None:
             beta = self.world.polar.emitted(beta, state.extra, state.d, lights.slot[tri])
-        self._leaf(state, *self._by_object(lights.slot[tri]), beta * lights.emitted(tri, state.d))
+        value = beta * lights.emitted(tri, state.d)
+        self.ends.append(("emission", lights.slot[tri], p, -state.d, luminance3(value)))
+        self._leaf(state, *self._by_object(lights.slot[tri]), value)
 
     def connect(self, state, it, bsdf, ctx):
         """A scattering surface ends the chain: its luminance toward the eye from the lights in direct
@@ -183,6 +190,7 @@ class ChiefRays(PathMethod):
                             self.specular_blockers[objs[s_].name] |= blockers
                 contrib[:, blocked] = 0.0
                 out += contrib.reshape(3, m, len(k)).sum(axis=2)
+        self.ends.append(("material", it.slot, it.p, -state.d, luminance3(state.beta)))  # lit or not (a screen)
         self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, luminance3(state.beta) * through)
         return None
 
@@ -298,4 +306,40 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
                       "through_specular": thr, "ray": np.concatenate([p[0] for p in parts])})
     paths.sort(key=lambda p: -float(luminance3(p["luminance"].T).sum()))
     return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths, "pupil_samples": samples,
-            "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()}}
+            "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()},
+            "aim_coverage": aim_coverage(world, method.ends)}
+
+
+def aim_coverage(world, ends: list[tuple]) -> dict[str, dict]:
+    """For every object whose light paths are aimed (an emission's or a scattering material's
+    ``aim``, tracer.optics.aimed): the share of what the analysed chains carry from it to the eye
+    (weighted as ``ChiefRays.ends`` says) that leaves it inside its aim target,
+    {name: {"target", "coverage", "weight"}} (weight: the sum of the chains' weights, to combine calls).
+    Below 1, forward tracing finds the rest only through the unaimed share of its samples, in rare
+    heavy particles: glass or a lens between the object and its target bends the aimed light off it
+    (a plane slab brings an image t (1 - 1/n) nearer), or the target is smaller than what the eye
+    receives light through."""
+    kinds: dict[tuple, list] = defaultdict(list)
+    for kind, slot, p, wo, lum in ends:
+        kinds[kind].append((slot, p, wo, lum))
+    objects = world.scene.objects
+    out = {}
+    for kind, parts in kinds.items():
+        slot = np.concatenate([s for s, _, _, _ in parts])
+        p = np.concatenate([q for _, q, _, _ in parts], axis=1)
+        wo = np.concatenate([w for _, _, w, _ in parts], axis=1)
+        lum = np.concatenate([v for _, _, _, v in parts])
+        for s in np.unique(slot).tolist():
+            o = objects[s]
+            aim = o.emission.aim if kind == "emission" else o.material.aim
+            k = np.flatnonzero((slot == s) & (lum > 0))
+            if aim is None or aim.share <= 0 or len(k) == 0:
+                continue
+            sign = -1.0 if aim.mode == "away" else 1.0
+            inside = world.target(aim.target).pdf(take(p, k), take(wo, k) * sign) > 0
+            total = float(lum[k].sum())
+            entry = out.setdefault(o.name, {"target": aim.target, "inside": 0.0, "luminance": 0.0})
+            entry["inside"] += float(lum[k][inside].sum())
+            entry["luminance"] += total
+    return {name: {"target": e["target"], "coverage": e["inside"] / e["luminance"], "weight": e["luminance"]}
+            for name, e in out.items()}
