@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import tempfile
 import time
+import traceback
 from pathlib import Path
 
 import bpy
@@ -32,6 +33,7 @@ from ..tracer.integrators import INTEGRATORS, Budget
 from ..tracer.render import finite_json, render_products, run_render
 from ..tracer.scene import load_scene
 from ..tracer.units import Y_WEIGHTS
+from ..tracer.validate import WorkersError, check_workers
 from ..tracer.world import World
 from .export import blender_terms, export_scene, generated_image_warnings
 
@@ -96,12 +98,32 @@ def _fail(engine, scene, message: str, key: str = "error") -> dict:
     return dict(LAST_RENDER)
 
 
+def unsupported_output(scene) -> str | None:
+    """The output settings the engine cannot honour, in the words of Blender's panels, or None. The
+    tracer renders one eye's whole frame of square pixels: a Render Region's smaller result made the
+    passes' sizes disagree (a TypeError, then a crash in Blender), and Stereoscopy's second view and a
+    pixel aspect were rendered as if they were not set."""
+    r = scene.render
+    if r.use_border:
+        return ("Output Properties > Format > Render Region: not supported (the eye's whole frame is rendered); "
+                "turn it off, or narrow the camera's field of view instead")
+    if r.use_multiview:
+        return ("Output Properties > Stereoscopy: not supported (one eye per render); turn it off and render each "
+                "eye's camera on its own")
+    if r.pixel_aspect_x != r.pixel_aspect_y:
+        return (f"Output Properties > Format > Aspect X / Y ({r.pixel_aspect_x:g} / {r.pixel_aspect_y:g}): the "
+                "retina's pixels are square; set both to the same value")
+    return None
+
+
 def render_final(engine, depsgraph) -> dict:
     """Render the depsgraph's scene into ``engine``'s result. Returns the report, or {"error": ...}, or
     {"stopped": ...} when test_break ended the render before its first batch (the result stays empty)."""
     scene = depsgraph.scene
     s = scene.hud
     budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds)
+    if (message := unsupported_output(scene)) is not None:
+        return _fail(engine, scene, message)
     with tempfile.TemporaryDirectory(prefix="hud-blender-") as tmp:
         folder = Path(tmp) / "scene"
         try:
@@ -113,9 +135,13 @@ def render_final(engine, depsgraph) -> dict:
             return _fail(engine, scene, str(e))
         for w in generated_image_warnings(scene):
             engine.report({"WARNING"}, f"HUD Tracer: {w}")
+        width, height = tracer_scene.eye.resolution
+        try:
+            check_workers(worker_count(scene), (width, height))
+        except WorkersError as e:
+            return _fail(engine, scene, f"Render Properties > Performance > Threads: {e}")
         world = World(tracer_scene)
         integrator = INTEGRATORS[s.method](world, s.seed)
-        width, height = tracer_scene.eye.resolution
         for name, (channels, chan_id, _) in passes_of(s.method).items():
             engine.add_pass(name, channels, chan_id)
         rr = engine.begin_result(0, 0, width, height)
@@ -142,6 +168,10 @@ def render_final(engine, depsgraph) -> dict:
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
             return _fail(engine, scene, str(e))
+        except Exception as e:  # a fault of the tracer: the result is ended (Blender crashes on an open one)
+            engine.end_result(rr)
+            traceback.print_exc()
+            return _fail(engine, scene, f"internal error ({type(e).__name__}: {e}); the traceback is on the console")
         write_passes(rr.layers[0], products.image, products.var_y, channels_of(result.film))
         engine.end_result(rr)
         full = engine.get_result()  # stamp data belongs to the whole result, not to the part just written

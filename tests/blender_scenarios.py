@@ -547,6 +547,48 @@ def scenario_cancel(threads, when):
     return out
 
 
+def scenario_unsupported_output(out):
+    """F12 (bpy.ops.render.render, write_still) of analytic-mirror with each output setting the engine
+    cannot honour, and with more processes than the memory holds (the add-on's tracer told the machine
+    has 1 GiB): the error Blender reports, and the files written."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    engine_mod = sys.modules[f"{module}.hud_addon.engine"]
+    validate = sys.modules[f"{module}.tracer.validate"]
+    cases = {"region, cropped": {"use_border": True, "use_crop_to_border": True},
+             "region": {"use_border": True, "use_crop_to_border": False},
+             "stereoscopy": {"use_multiview": True},
+             "pixel aspect": {"pixel_aspect_x": 2.0},
+             "threads": {"threads_mode": "FIXED", "threads": 16}}
+    result = {}
+    for name, settings in cases.items():
+        bpy.ops.hud.add_preset(preset="analytic-mirror")
+        scene = bpy.context.scene
+        scene.hud.budget, scene.hud.rays = "RAYS", 100_000
+        scene.render.resolution_x, scene.render.resolution_y = 32, 24
+        scene.render.border_min_x, scene.render.border_max_x = 0.25, 0.75
+        for key, value in settings.items():
+            setattr(scene.render, key, value)
+        folder = Path(out) / name.replace(", ", "_").replace(" ", "_")
+        folder.mkdir(parents=True)
+        scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+        scene.render.filepath, scene.render.use_file_extension = str(folder / "img.exr"), False
+        memory = validate.physical_memory_bytes
+        validate.physical_memory_bytes = lambda: 2**30
+        try:
+            bpy.ops.render.render(write_still=True)
+            raised = None
+        except RuntimeError as e:
+            raised = str(e)
+        finally:
+            validate.physical_memory_bytes = memory
+        for key in settings:  # back to the defaults for the next case
+            setattr(scene.render, key, {"threads_mode": "AUTO", "threads": 1, "pixel_aspect_x": 1.0}.get(key, False))
+        result[name] = {"raised": raised, "error": engine_mod.LAST_RENDER.get("error"),
+                        "files": sorted(p.name for p in folder.iterdir())}
+    disable(module)
+    return result
+
+
 def scenario_progressive(seconds):
     """A render of ``seconds`` with Blender's default Performance > Threads (auto-detect): the number of
     processes, and how often the Render Result was updated while it ran."""

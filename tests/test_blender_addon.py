@@ -255,6 +255,22 @@ def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
     assert len(lines) == 1 and lines[0].startswith("error: ") and (case.split()[0] in lines[0] or str(out) in lines[0])
 
 
+def test_output_settings_the_engine_cannot_honour_are_refused_in_one_line(tmp_path):
+    """A Render Region made the passes' sizes disagree with the frame (a TypeError, then Blender crashed),
+    Stereoscopy's second eye and a pixel aspect were rendered as if not set, and more processes than the
+    memory holds ended in a WorkersError traceback and a crash. Now each is refused before the first ray,
+    naming Blender's panel and field, and nothing is written."""
+    res, proc = scenario("unsupported_output", tmp_path)
+    assert "Traceback" not in proc.stdout + proc.stderr
+    where = {"region, cropped": "Render Region", "region": "Render Region", "stereoscopy": "Stereoscopy",
+             "pixel aspect": "Aspect X / Y", "threads": "Performance > Threads"}
+    for name, words in where.items():
+        case = res[name]
+        assert case["error"] and words in case["error"] and words in (case["raised"] or ""), (name, case)
+        assert case["files"] == [], (name, case)
+    assert "at most" in res["threads"]["error"]
+
+
 def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
     """Issue 11, finding 7: with Blender's default threads (auto-detect) a render runs on one process per
     core, and the Render Result is updated while it runs (at most once a second, after merged batches)."""
