@@ -107,8 +107,16 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
     def execute(self, context):
         scene = context.scene
         with tempfile.TemporaryDirectory(prefix="hud-paths-") as tmp:
-            tracer_scene = load_scene(export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene"))
-            paths = INTEGRATORS["forward"](tracer_scene, scene.hud.seed).light_paths(self.particles)
+            folder = Path(tmp) / "scene"
+            try:  # as Export and F12 report it: the object or setting at fault, not the staged scene.json
+                tracer_scene = load_scene(export_scene(context.evaluated_depsgraph_get(), folder))
+                paths = INTEGRATORS["forward"](tracer_scene, scene.hud.seed).light_paths(self.particles)
+            except SceneError as e:
+                self.report({"ERROR"}, f"Show Light Paths: {blender_terms(e, folder, scene)}")
+                return {"CANCELLED"}
+            except (ValueError, TracerError, OSError) as e:
+                self.report({"ERROR"}, f"Show Light Paths: {e}")
+                return {"CANCELLED"}
         if not paths:
             self.report({"WARNING"}, f"none of {self.particles:,} particles reached the eye pupil")
             return {"CANCELLED"}

@@ -612,8 +612,23 @@ def scenario_light_paths():
     edges = len(obj.data.edges)
     eye = tuple(bpy.context.scene.camera.location)
     mm = 1000.0 * bpy.context.scene.unit_settings.scale_length
+    errors = {}
+    scene = bpy.context.scene
+    camera, scene.camera = scene.camera, None
+    try:
+        bpy.ops.hud.show_light_paths(particles=1000)
+    except RuntimeError as e:
+        errors["no camera"] = str(e)
+    scene.camera = camera
+    bpy.ops.mesh.primitive_plane_add(size=10, location=(0, 100, 0))
+    plate = bpy.context.object
+    plate.name, plate.hud.role = "glass plate", "dielectric"
+    try:
+        bpy.ops.hud.show_light_paths(particles=1000)
+    except RuntimeError as e:
+        errors["open glass"] = str(e)
     disable(module)
-    return {"vertices": verts, "edges": edges, "eye": eye, "mm_per_unit": mm}
+    return {"vertices": verts, "edges": edges, "eye": eye, "mm_per_unit": mm, "errors": errors}
 
 
 def scenario_no_light():

@@ -281,12 +281,19 @@ def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
 
 
 def test_show_light_paths_draws_paths_that_end_at_the_eye():
-    res, _ = scenario("light_paths")
+    """And a scene it cannot trace (no active camera, an open glass plate) is reported in one line in
+    Blender's terms, as Export reports it; both were tracebacks naming a temporary scene.json."""
+    res, proc = scenario("light_paths")
     verts = np.array(res["vertices"])
     assert res["edges"] > 0 and len(verts) > 0
     # Every drawn path ends in the pupil: the closest vertices sit at the eye (4 mm pupil).
     dist_mm = np.linalg.norm(verts - np.array(res["eye"]), axis=1) * res["mm_per_unit"]
     assert np.sort(dist_mm)[:10].max() < 2.001
+    errors = res["errors"]
+    assert "camera" in errors["no camera"] and "'glass plate'" in errors["open glass"], errors
+    for message in errors.values():
+        assert "Show Light Paths: " in message and "Traceback" not in message and "scene.json" not in message
+    assert "Traceback" not in proc.stdout + proc.stderr
 
 
 def test_render_reports_no_light_to_the_user():
