@@ -104,7 +104,12 @@ def _render(args, blend: Path, outputs) -> int:
     import bpy
 
     module = enable_from_source(bpy, tmp)
-    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+    except RuntimeError as e:  # not a .blend, or a truncated one: Blender's reason, on one line
+        reason = str(e).splitlines()[0].removeprefix("Error: ").strip() or "cannot be opened"
+        print(f"error: {blend}: not a readable .blend file ({reason})", file=sys.stderr)
+        return 2
     scene = bpy.context.scene
     scene.render.engine = "HUD_TRACER"
     if args.method:
@@ -126,9 +131,11 @@ def _render(args, blend: Path, outputs) -> int:
     try:
         bpy.ops.render.render(write_still=True)
     except RuntimeError as e:  # the engine reported an error: Blender raises it in background mode
-        if "error" not in engine.LAST_RENDER:
-            print(f"error: {str(e).splitlines()[0]}", file=sys.stderr)
-            return 1
+        if "error" not in engine.LAST_RENDER:  # Blender refused before the engine ran: the file's settings
+            reason = str(e).splitlines()[0].removeprefix("Error: ").strip()
+            print(f"error: {blend.name}: {reason} (Blender's check of the file's scene, camera and output)",
+                  file=sys.stderr)
+            return 2
     figures = dict(engine.LAST_RENDER)
     for w in figures.get("warnings", []):
         print(f"warning: {w}", file=sys.stderr)

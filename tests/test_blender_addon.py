@@ -271,6 +271,26 @@ def test_output_settings_the_engine_cannot_honour_are_refused_in_one_line(tmp_pa
     assert "at most" in res["threads"]["error"]
 
 
+def test_hud_render_of_a_file_blender_cannot_render_exits_2_in_one_line(tmp_path):
+    """A file that is not a .blend was a traceback from open_mainfile, and Blender's own refusals (no
+    camera) exit 1 as "error: Error: ..."; both are the input's fault: exit 2, our one line naming the file."""
+    not_blend = tmp_path / "notes.blend"
+    not_blend.write_text("not a blend file")
+    empty = tmp_path / "empty.blend"
+    made = subprocess.run([sys.executable, "-c", "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); "
+                           f"bpy.ops.wm.save_as_mainfile(filepath={str(empty)!r})"], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert made.returncode == 0 and empty.is_file(), made.stderr[-2000:]
+    for blend, words in ((not_blend, "not a readable .blend file"), (empty, "no camera")):
+        out = tmp_path / f"out-{blend.stem}"
+        proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(out), "--rays",
+                               "100000"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+        ours = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+        assert len(ours) == 1 and blend.name in ours[0] and words in ours[0], proc.stderr
+        assert not out.exists() or not any(out.iterdir())
+
+
 def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
     """Issue 11, finding 7: with Blender's default threads (auto-detect) a render runs on one process per
     core, and the Render Result is updated while it runs (at most once a second, after merged batches)."""
