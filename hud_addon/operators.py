@@ -57,6 +57,14 @@ class HUD_OT_add_preset(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def unsaved_relative(folder: str, what: str) -> str | None:
+    """The message for a folder relative to the .blend ("//") while the .blend is not saved (Blender would
+    resolve it against the working directory, wherever that is), or None."""
+    if folder.startswith("//") and not bpy.data.filepath:
+        return f"{what}: the folder is relative to the .blend, which is not saved: save it or choose an absolute folder"
+    return None
+
+
 class HUD_OT_export_scene(bpy.types.Operator):
     """Write the tracer's scene folder (scene.json, meshes, textures) for this scene"""
 
@@ -72,6 +80,9 @@ class HUD_OT_export_scene(bpy.types.Operator):
     def execute(self, context):
         if not self.directory:
             self.report({"ERROR"}, "choose a folder")
+            return {"CANCELLED"}
+        if (message := unsaved_relative(self.directory, "HUD export")) is not None:
+            self.report({"ERROR"}, message)
             return {"CANCELLED"}
         scene = context.scene
 
@@ -183,9 +194,8 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
         scene = context.scene
         s = scene.hud
         folder = Path(bpy.path.abspath(s.eyebox_folder))
-        if s.eyebox_folder.startswith("//") and not bpy.data.filepath:
-            self.report({"ERROR"}, "Eyebox Sweep: the folder is relative to the .blend, which is not saved: save it "
-                                   "or choose an absolute folder")
+        if (message := unsaved_relative(s.eyebox_folder, "Eyebox Sweep")) is not None:
+            self.report({"ERROR"}, message)
             return {"CANCELLED"}
         half = (s.eyebox_half_width_mm, s.eyebox_half_height_mm)
         field = None if s.eyebox_field == "AUTO" else tuple(s.eyebox_field_deg)

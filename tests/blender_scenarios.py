@@ -459,6 +459,18 @@ def scenario_failed_export(out):
     scene.camera = camera
     bpy.data.objects.remove(extra)
     attempt("after_fix")
+    # A folder relative to the .blend ("//") while the .blend is not saved: Blender resolved it against
+    # the working directory, and the export landed wherever that was.
+    cwd = os.getcwd()
+    os.chdir(out)
+    try:
+        bpy.ops.hud.export_scene(directory="//hud_export/")
+        relative = None
+    except RuntimeError as e:
+        relative = str(e)
+    finally:
+        os.chdir(cwd)
+    attempts["relative_unsaved"] = {"message": relative, "written": (out / "hud_export").exists()}
     disable(module)
     return {"good": good, "attempts": attempts, "missing": str(missing)}
 

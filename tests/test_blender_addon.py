@@ -387,6 +387,8 @@ def test_a_failed_export_leaves_the_earlier_export_as_it_was(tmp_path):
     from tracer.scene import load_scene
 
     assert load_scene(tmp_path / "exports" / "F").object("mirror").vertices.shape[0] == 4
+    relative = attempts["relative_unsaved"]  # "//" of a .blend not saved: refused, nothing written
+    assert "not saved" in (relative["message"] or "") and not relative["written"], relative
 
 
 def test_export_follows_render_visibility(tmp_path):
