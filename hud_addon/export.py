@@ -609,6 +609,10 @@ _EXPORT_FILE = re.compile(r"^'?(?:textures|meshes)/[^':]*'?:\s*")
 #: The Blender terms of the fields of the environment's sun block.
 _SUN_TERMS = {"direction": "rotation", "illuminance_lux": "HUD Sun > Illuminance", "angular_diameter_deg": "Angle",
               "color": "Color"}
+#: World > HUD Environment's labels of the environment block's fields (the image's own: "file").
+_ENVIRONMENT_TERMS = {"type": "Environment", "luminance": "Luminance", "color": "Color",
+                      "calibration": "Calibration", "calibration.mode": "Calibration",
+                      "calibration.value": "Value", "rotation_deg": "Rotation"}
 
 
 #: How the tracer says, in scene.json's terms, that an element needs polarisation on (tracer.scene).
@@ -616,7 +620,10 @@ _POLARISATION_OFF = re.compile(r'remove "polarisation": "off"(?: \(or this block
 
 
 def _image_hint(image) -> str:
-    if image is not None and image.source == "GENERATED" and image.packed_file is None:
+    """Why a generated image may hold none of the pixels the user made: only where Blender has
+    regenerated it (it is not dirty: not painted or filled since it was made or the file was opened);
+    an image whose pixels are in memory, and wrong, gets no hint."""
+    if image is not None and image.source == "GENERATED" and image.packed_file is None and not image.is_dirty:
         return (f" (image {image.name!r} is a generated image that is not packed: Blender does not save its pixels "
                 "with the .blend and regenerates them when the file is opened; pack it with Image > Pack, or save it "
                 "to a file)")
@@ -660,9 +667,12 @@ def blender_terms(error, folder: Path, scene) -> str:
         world = scene.world
         image = world.hud.image if world is not None else None
         where = f"World {world.name!r}" if world is not None else "World"
-        if image is not None:
+        key = field[len("environment"):].lstrip(".").split("[")[0]
+        if key in ("", "file") and image is not None:  # the panorama itself: its file or pixels
             where += f": HDRI image {image.name!r}"
             hint = _image_hint(image)
+        elif key in _ENVIRONMENT_TERMS:
+            where += f": HUD Environment > {_ENVIRONMENT_TERMS[key]}"
     elif field.startswith("eye"):
         where = f"camera {scene.camera.name!r}" if scene.camera is not None else "camera"
         if field.startswith("eye.analyser"):

@@ -559,6 +559,40 @@ def scenario_cancel(threads, when):
     return out
 
 
+def scenario_world_and_slide_messages(out):
+    """Exports that fail on the World's fields and on a slide's pixels: what each says."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    world = scene.world or bpy.data.worlds.new("World")
+    scene.world = world
+    sky = bpy.data.images.new("old sky", 16, 8, float_buffer=True)
+    sky.pixels.foreach_set([1.0] * 16 * 8 * 4)
+    sky.pack()
+    world.hud.image = sky
+    messages = {}
+
+    def attempt(case):
+        try:
+            bpy.ops.hud.export_scene(directory=str(Path(out) / case))
+            messages[case] = None
+        except RuntimeError as e:
+            messages[case] = str(e)
+
+    world.hud.kind, world.hud.luminance = "uniform", 1e300  # the panorama is left over, not used
+    attempt("uniform luminance")
+    world.hud.kind, world.hud.calibration, world.hud.value = "hdri", "scale", 1e300
+    attempt("calibration value")
+    world.hud.kind = "none"
+    lcd = next(o for o in scene.objects if o.hud.role == "lcd")
+    hot = bpy.data.images.new("hot slide", 8, 8, float_buffer=True)  # generated, filled: its pixels are here
+    hot.pixels.foreach_set([2.0] * 256)
+    lcd.hud.image = hot
+    attempt("slide above 1")
+    disable(module)
+    return messages
+
+
 def scenario_unsupported_output(out):
     """F12 (bpy.ops.render.render, write_still) of analytic-mirror with each output setting the engine
     cannot honour, and with more processes than the memory holds (the add-on's tracer told the machine

@@ -255,6 +255,18 @@ def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
     assert len(lines) == 1 and lines[0].startswith("error: ") and (case.split()[0] in lines[0] or str(out) in lines[0])
 
 
+def test_world_and_slide_errors_name_the_field_at_fault(tmp_path):
+    """A uniform World's luminance was blamed on a panorama it does not use, a calibration value named no
+    field, and a slide with values above 1 got the hint that a generated image loses its pixels, which
+    these (in memory, filled) had not."""
+    res, _ = scenario("world_and_slide_messages", tmp_path)
+    assert "World 'World': HUD Environment > Luminance" in res["uniform luminance"], res
+    assert "old sky" not in res["uniform luminance"]
+    assert "World 'World': HUD Environment > Value" in res["calibration value"], res
+    assert "'hot slide'" not in res["slide above 1"] or "regenerates" not in res["slide above 1"], res
+    assert "Slide" in res["slide above 1"], res
+
+
 def test_output_settings_the_engine_cannot_honour_are_refused_in_one_line(tmp_path):
     """A Render Region made the passes' sizes disagree with the frame (a TypeError, then Blender crashed),
     Stereoscopy's second eye and a pixel aspect were rendered as if not set, and more processes than the
