@@ -609,6 +609,36 @@ def test_scatter_conserves_the_degree_of_polarisation_bound(mode):
         assert np.all(np.abs((frame * d).sum(axis=0)) < 1e-4)  # the frame stays perpendicular
 
 
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_coatings_of_one_s_p_pair_for_all_channels_carry_one_state(tmp_path, method):
+    """The periscope below with both coatings achromatic (R_s 0.8, R_p 0.2): paths carry one
+    polarisation state for the three channels, which the coating's per-channel s/p rows did not fit
+    (every method ended in a broadcast ValueError, found by a hand-built scene). Unpolarised light
+    leaves L (R_s^2 + R_p^2) / 2 = 0.34 L, not the unpolarised product 0.25 L."""
+    sb = SceneBuilder(tmp_path / "c", "periscope", "two coatings")
+    sq = math.sqrt(0.5)
+    coat = {"type": "coating", "reflectance_s": 0.8, "reflectance_p": 0.2, "transmittance_s": 0.0,
+            "transmittance_p": 0.0}
+    sb.add("lower", rectangle(40.0, 40.0)[:2], coat, frame_matrix([0, 100.0, 0], [1, 0, 0], [0, -sq, sq]))
+    sb.add("upper", rectangle(40.0, 40.0)[:2], coat, frame_matrix([0, 100.0, 100.0], [1, 0, 0], [0, sq, -sq]))
+    sb.add("panel", rectangle(60.0, 60.0)[:2], {"type": "absorber"}, frame_matrix([0, 200.0, 100.0], [1, 0, 0],
+                                                                                  [0, -1, 0]),
+           emission={"luminance": 1000.0, "aim": {"target": "upper", "share": 0.95}})
+    folder = sb.write(eye={"position": [0.0, 0.0, 0.0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                           "resolution": [4, 4], "fov_deg": [5.0, 5.0]})
+    world = World(load_scene(folder))
+    assert world.polar.channels == 1
+    expected = 1000.0 * 0.5 * (0.8**2 + 0.2**2)
+    res = INTEGRATORS[method](world, 2, options=dict(world.scene.method_options(method))).render(
+        Budget(rays=20_000 if method == "backward" else 10_000_000))
+    y = res.film.rgb() @ Y_WEIGHTS
+    se = math.sqrt(res.film.variance_y().sum()) / y.size
+    if method == "backward":
+        assert y.mean() == pytest.approx(expected, rel=1e-4)
+    else:
+        assert abs(y.mean() - expected) < z_bound(2) * se and se < 0.05 * expected, (y.mean(), se)
+
+
 def test_a_chromatic_coating_keeps_a_state_per_channel(tmp_path):
     """A periscope of two coatings at 45 deg (one plane of incidence): the first with s/p reflectances
     that differ by channel, the second with one pair for all. Unpolarised light leaves, per channel c,

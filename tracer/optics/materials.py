@@ -385,6 +385,9 @@ class Coating(BSDF):
             #: The matrices differ by channel: paths need a polarisation state per channel.
             self.chromatic_polarisation = any(float(np.ptp(a, axis=0).max()) > 1e-7
                                               for a in (*self.sp_reflect, *self.sp_transmit))
+            if not self.chromatic_polarisation:  # one row, as the paths then carry one state for all channels
+                self.sp_reflect = tuple(a[:1] for a in self.sp_reflect)
+                self.sp_transmit = tuple(a[:1] for a in self.sp_transmit)
         else:
             self.r, self.t = self.table("reflectance"), self.table("transmittance")
         yr, yt = luminance3(self.r), luminance3(self.t)
