@@ -28,7 +28,7 @@ from ..schema import Field, parse_block
 from ..units import luminance
 from ..validate import FieldChecker
 from ..world import World
-from .path import CUT_KEY, PROBE_DEPTH, PROBE_KEY, Context, Roulette, Timers
+from .path import CUT_KEY, PROBE_DEPTH, PROBE_KEY, STILL_KEY, Context, Roulette, Timers
 
 #: Paths per batch: the unit of work that is seed-addressed, distributed and merged.
 DEFAULT_BATCH = 1 << 17
@@ -318,6 +318,7 @@ class Integrator:
         """The light of paths cut at max_depth, as the probe measured it (tracer.integrators.path.probe_cut),
         in ``extra["max_depth_cut"]``; a warning where it exceeds twice the image mean's standard error."""
         cut = result.extra.pop(CUT_KEY, 0)
+        still = result.extra.pop(STILL_KEY, 0)
         sums = {k.split(":", 1)[1]: result.extra.pop(k) for k in list(result.extra) if k.startswith(PROBE_KEY + ":")}
         if not cut:
             return
@@ -327,16 +328,18 @@ class Integrator:
         mean = float(luminance(film.rgb()).mean())
         se = film.mean_standard_error()
         result.extra["max_depth_cut"] = {
-            "paths": int(cut), "probe_segments": PROBE_DEPTH,
+            "paths": int(cut), "probe_segments": PROBE_DEPTH, "still_going_after_probe": int(still),
             "missing_luminance_cd_m2": missing, "missing_share_of_mean": missing / mean if mean > 0 else None,
-            "image_mean_standard_error_cd_m2": se}
+            "missing_is_lower_bound": still > 0, "image_mean_standard_error_cd_m2": se}
         if missing > 2 * se:
             share = f" ({missing / mean:.2%} of it)" if mean > 0 else ""
+            trapped = (f"; {still:,} of them were still going after those segments (trapped, as between the faces "
+                       "of glass), so the bias may be larger" if still else "")
             result.warnings.append(
                 f"{cut:,} paths were cut at methods.{self.name}.max_depth = {self.max_depth}; followed "
-                f"{PROBE_DEPTH} segments further they add {missing:.3g} cd/m^2 to the image mean{share}, "
-                f"{missing / se if se > 0 else math.inf:.1f} times its standard error: the image is biased low; "
-                "raise max_depth")
+                f"{PROBE_DEPTH} segments further they add {'at least ' if still else ''}{missing:.3g} cd/m^2 to the "
+                f"image mean{share}, {missing / se if se > 0 else math.inf:.1f} times its standard error: the image "
+                f"is biased low; raise max_depth{trapped}")
 
     found_what = "found light"
 

@@ -70,7 +70,7 @@ from .base import (
     RenderResult,
     register,
 )
-from .path import CUT_KEY, PROBE_KEY
+from .path import CUT_KEY, PROBE_KEY, STILL_KEY
 
 #: The methods a channel may be given, in the order the pilots try them.
 CANDIDATES = ("backward", "forward", "photon")
@@ -458,7 +458,7 @@ class _Channels(Integrator):
             for k, v in b.extra.items():
                 if k.startswith(PROBE_KEY + ":"):  # the max-depth probe's tally, per component
                     k = f"{PROBE_KEY}:{c.prefix}{k[len(PROBE_KEY) + 1:]}"
-                elif k != CUT_KEY:
+                elif k not in (CUT_KEY, STILL_KEY):
                     k = c.prefix + k
                 total.extra[k] = total.extra.get(k, 0) + v
             for k, v in (("rays", b.rays), ("paths", b.paths), ("found", b.found), ("seconds", b.seconds)):

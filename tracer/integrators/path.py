@@ -394,6 +394,9 @@ PROBE_DEPTH = 16
 #: ``ctx.store`` keys of the probe's tallies: the luminance the cut paths would have added, per film
 #: component (sums of Y, not normalised), and the number of cut paths.
 PROBE_KEY, CUT_KEY = "cut_luminance_sum", "cut_paths"
+#: ``ctx.store`` key of the cut paths still going after the probe's segments: their light beyond is
+#: not in the tally, which is then a lower bound (paths trapped by total internal reflection).
+STILL_KEY = "cut_paths_still_going"
 
 
 def probe_cut(method: PathMethod, state: PathState, ctx: Context):
@@ -405,7 +408,7 @@ def probe_cut(method: PathMethod, state: PathState, ctx: Context):
     flags = None if ctx.sample_found is None else ctx.sample_found.copy()
     ctx.splats, ctx.rng = type(saved[0])(), ctx.probe_rng
     try:
-        trace(method, state, ctx, PROBE_DEPTH, probe=False)
+        still = trace(method, state, ctx, PROBE_DEPTH, probe=False)
         tally = {comp: float(luminance3(ctx.splats.gather(comp)[2]).sum()) for comp in ctx.splats.parts}
     finally:
         ctx.splats, ctx.found, ctx.rng = saved[:3]
@@ -416,6 +419,7 @@ def probe_cut(method: PathMethod, state: PathState, ctx: Context):
     for comp, y in tally.items():
         ctx.store[f"{PROBE_KEY}:{comp}"] = ctx.store.get(f"{PROBE_KEY}:{comp}", 0.0) + y
     ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
+    ctx.store[STILL_KEY] = ctx.store.get(STILL_KEY, 0) + still
 
 
 def _hooked(method: PathMethod, hook: str) -> bool:
