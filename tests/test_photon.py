@@ -194,6 +194,24 @@ def test_paths_cut_at_max_depth_are_named_as_the_cause(tmp_path):
     assert deep.extra["photon"]["eye_paths_cut_at_max_depth"] == 0 and not any("cut" in w for w in deep.warnings)
 
 
+def test_a_scene_of_glass_alone_is_not_blamed_on_max_depth(tmp_path):
+    """A glass block against a uniform sky, no scattering surface anywhere: some eye paths are trapped in
+    the block and cut, and the warning said they were cut "before any reached one [a scattering
+    surface]: raise it", where there is none to reach (a hand-built scene). It says what the image
+    holds, and names the backward method."""
+    sb = SceneBuilder(tmp_path / "g", "glass", "a glass block in a uniform sky")
+    sb.add("block", box(40.0, 40.0, 40.0), {"type": "dielectric", "ior": 1.5}, frame_matrix([0, 100.0, 0], [1, 0, 0],
+                                                                                           [0.3, -1, 0.2]))
+    folder = sb.write(environment={"type": "uniform", "luminance": 1000.0},
+                      eye={"position": [0.0, 0.0, 0.0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                           "resolution": [8, 8], "fov_deg": [20.0, 20.0]})
+    scene = load_scene(folder)
+    options = dict(scene.method_options("photon")) | {"max_depth": 4}
+    said = " ".join(INTEGRATORS["photon"](scene, 1, options=options).render(Budget(rays=200_000)).warnings)
+    assert "no eye path reached a scattering (non-specular) surface" in said and "backward method" in said, said
+    assert "before any reached one" not in said, said
+
+
 def test_batches_merge_exactly_across_processes(tmp_path):
     """Batches are independent replicates addressed by seed: two worker processes give the image of one
     process bit for bit."""
