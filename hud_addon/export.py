@@ -237,7 +237,13 @@ def emission_spec(obj) -> dict | None:
 
 def methods_spec(scene) -> dict:
     """Every method's options from the render settings (the folder renders the same with any method)."""
-    return {name: schema_ui.export(scene.hud, cls.options, f"{name}_") for name, cls in INTEGRATORS.items()}
+    out = {}
+    for name, cls in INTEGRATORS.items():
+        try:
+            out[name] = schema_ui.export(scene.hud, cls.options, f"{name}_")
+        except ValueError as e:  # where the panel shows it
+            raise ValueError(f"Render Properties > HUD Tracer > {name.capitalize()} options > {e}") from None
+    return out
 
 
 def eye_spec(scene, depsgraph=None) -> dict:
@@ -630,6 +636,22 @@ def _image_hint(image) -> str:
     return ""
 
 
+def _in_blender_words(message: str) -> str:
+    """The tracer's scene.json wording of a message, as a Blender user meets the same things."""
+    def no_object(m):
+        name = json.loads(m.group(1))
+        if name in bpy.data.objects:
+            obj = bpy.data.objects[name]
+            why = ("the camera (the eye itself), not an object the rays meet" if obj.type == "CAMERA"
+                   else "an object the render does not see: give it a HUD Optical Role (and leave it enabled in "
+                        "renders)")
+            return f"{name!r} is {why}"
+        return f"no object named {name!r}"
+    message = re.sub(r'no object named ("(?:[^"\\]|\\.)*")(?: \(or use "eye"\))?', no_object, message)
+    return message.replace("an LCD needs texture coordinates (an OBJ with vt lines)",
+                           "an LCD needs texture coordinates: add a UV map (Object Data Properties > UV Maps)")
+
+
 def blender_terms(error, folder: Path, scene) -> str:
     """A tracer SceneError about an exported scene folder, in Blender's terms: the object, World or
     camera and the property at fault instead of the temporary scene.json and its JSON path (issue 11,
@@ -675,6 +697,8 @@ def blender_terms(error, folder: Path, scene) -> str:
             where += f": HUD Environment > {_ENVIRONMENT_TERMS[key]}"
     elif field.startswith("eye"):
         where = f"camera {scene.camera.name!r}" if scene.camera is not None else "camera"
+        if field == "eye.fov_deg":
+            where += ": Lens and Sensor (the field of view they give)"
         if field.startswith("eye.analyser"):
             key = field[len("eye.analyser"):].lstrip(".")
             f = next((f for f in ANALYSER.fields if f.name == key), None)
@@ -683,10 +707,15 @@ def blender_terms(error, folder: Path, scene) -> str:
         where = "Render Properties > HUD Tracer > Polarisation"
     elif field.startswith("methods."):
         method, _, option = field[len("methods."):].partition(".")
-        where = f"Render Properties > HUD Tracer > {method.capitalize()} options{': ' + option if option else ''}"
+        where = f"Render Properties > HUD Tracer > {method.capitalize()} options"
+        fields = INTEGRATORS[method].options if method in INTEGRATORS else ()
+        for key in filter(None, option.split(".")):  # the panel's labels, down nested groups (exit pupil)
+            f = next((f for f in fields if f.name == key.split("[")[0]), None)
+            where += f" > {f.label or key if f is not None else key}"
+            fields = f.fields if f is not None and f.fields else ()
     else:
         where = field or "scene"
-    return f"{where}: {message}{hint}"
+    return f"{where}: {_in_blender_words(message)}{hint}"
 
 
 def generated_image_warnings(scene) -> list[str]:

@@ -216,7 +216,12 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
                     outputs.keep()
                 finally:
                     outputs.close()
-        except (ScanArgumentError, FieldNotFound, TracerError, ValueError, OSError) as e:
+        except FieldNotFound as e:  # the command line's words for giving it, in the panel's
+            self.report({"ERROR"}, "Eyebox Sweep: " + str(e).replace(
+                "give it (field_deg, --field FX FY)",
+                "set Display field to Given and give its Field (full width and height)"))
+            return {"CANCELLED"}
+        except (ScanArgumentError, TracerError, ValueError, OSError) as e:
             self.report({"ERROR"}, f"Eyebox Sweep: {e}")
             return {"CANCELLED"}
         finally:

@@ -175,7 +175,10 @@ def export(owner, fields, prefix: str = "", alternatives=(), save_image=None) ->
         value = getattr(owner, prefix + f.name) if f.kind != "group" else None
         if f.kind == "group":
             if getattr(owner, f"{prefix}{f.name}_use"):
-                out[f.name] = export(owner, f.fields, f"{prefix}{f.name}_", f.alternatives, save_image)
+                try:
+                    out[f.name] = export(owner, f.fields, f"{prefix}{f.name}_", f.alternatives, save_image)
+                except ValueError as e:  # the group's title in front, as the panel nests it
+                    raise ValueError(f"{f.title} > {e}") from None
         elif f.kind == "image":
             if value is None:
                 raise ValueError(f"{f.title}: choose an image")

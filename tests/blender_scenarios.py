@@ -593,6 +593,55 @@ def scenario_world_and_slide_messages(out):
     return messages
 
 
+def scenario_option_messages(out):
+    """Exports and an Eyebox Sweep that fail on render settings, object references, the lens and a mesh:
+    what each says."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    s = bpy.context.scene
+    messages = {}
+
+    def attempt(case, op=lambda folder: bpy.ops.hud.export_scene(directory=str(folder))):
+        try:
+            op(Path(out) / case.replace(" ", "_"))
+            messages[case] = None
+        except RuntimeError as e:
+            messages[case] = str(e)
+
+    s.hud.backward_exit_pupil_use, s.hud.backward_exit_pupil_by = True, "object"
+    attempt("exit pupil unset")
+    s.hud.backward_exit_pupil_object = s.camera
+    attempt("exit pupil at the camera")
+    s.hud.backward_exit_pupil_use = False
+    bpy.ops.mesh.primitive_plane_add(size=5, location=(0, 50, 0))
+    window = bpy.context.object
+    window.name = "window"  # no HUD Optical Role
+    panel = s.objects["panel"]
+    panel.hud.emission_aim, panel.hud.emission_aim_object = "OBJECT", window
+    attempt("aim at an object without a role")
+    panel.hud.emission_aim = "NONE"
+    s.hud.photon_alpha = 0.0
+    attempt("photon radius reduction 0")
+    s.hud.photon_alpha = 0.5
+    s.camera.data.lens = 0.5
+    attempt("lens too wide")
+    s.camera.data.lens = 50.0
+    s.hud.eyebox_folder = str(Path(out) / "eyebox")
+    attempt("eyebox without an LCD", lambda folder: bpy.ops.hud.eyebox_sweep())
+    mesh = bpy.data.meshes.new("quad")
+    mesh.from_pydata([(-5, 60, -5), (5, 60, -5), (5, 60, 5), (-5, 60, 5)], [], [(0, 1, 2, 3)])
+    lcd = bpy.data.objects.new("lcd", mesh)
+    s.collection.objects.link(lcd)
+    lcd.hud.role = "lcd"
+    slide = bpy.data.images.new("slide", 8, 8)
+    slide.pixels.foreach_set([1.0] * 256)
+    slide.pack()
+    lcd.hud.image = slide
+    attempt("LCD without a UV map")
+    disable(module)
+    return messages
+
+
 def scenario_unsupported_output(out):
     """F12 (bpy.ops.render.render, write_still) of analytic-mirror with each output setting the engine
     cannot honour, and with more processes than the memory holds (the add-on's tracer told the machine

@@ -267,6 +267,24 @@ def test_world_and_slide_errors_name_the_field_at_fault(tmp_path):
     assert "Slide" in res["slide above 1"], res
 
 
+def test_option_and_reference_errors_are_told_in_the_panels_words(tmp_path):
+    """They named a bare "Object", scene.json keys (alpha, "eye", an OBJ's vt lines), no object where the
+    object exists but is not exported, the field angle without its value, and command-line flags."""
+    res, _ = scenario("option_messages", tmp_path)
+    expect = {"exit pupil unset": ["Backward options > Exit pupil > Object", "choose an object"],
+              "exit pupil at the camera": ["Exit pupil > Object", "is the camera"],
+              "aim at an object without a role": ["'panel'", "'window' is an object the render does not see",
+                                                  "HUD Optical Role"],
+              "photon radius reduction 0": ["Photon options > Radius reduction", "must be > 0"],
+              "lens too wide": ["Lens and Sensor", "got 17"],
+              "eyebox without an LCD": ["Eyebox Sweep", "set Display field to Given"],
+              "LCD without a UV map": ["'lcd'", "add a UV map"]}
+    for case, words in expect.items():
+        message = res[case] or ""
+        assert all(w in message for w in words), (case, message)
+        assert "--field" not in message and "vt lines" not in message and '"eye"' not in message, (case, message)
+
+
 def test_output_settings_the_engine_cannot_honour_are_refused_in_one_line(tmp_path):
     """A Render Region made the passes' sizes disagree with the frame (a TypeError, then Blender crashed),
     Stereoscopy's second eye and a pixel aspect were rendered as if not set, and more processes than the

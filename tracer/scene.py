@@ -572,7 +572,7 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                                   f"machine has {memory / 2**30:.1f} GiB (the limit is half of it)")
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
     if np.any(fov <= 0) or np.any(fov >= 170):
-        ck.fail("eye.fov_deg", "each field angle must lie in (0, 170) degrees")
+        ck.fail("eye.fov_deg", f"each field angle must lie in (0, 170) degrees, got {fov[0]:.4g} x {fov[1]:.4g}")
     analyser = None
     if spec.get("analyser") is not None:
         analyser = parse_block(ck, spec["analyser"], "eye.analyser", ANALYSER.fields)
