@@ -3,6 +3,7 @@ exit status 2, no partial output)."""
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -324,3 +325,17 @@ def test_a_ray_budget_may_be_written_as_a_whole_number_in_any_notation(text, val
             ray_count(text)
     else:
         assert ray_count(text) == value and isinstance(ray_count(text), int)
+
+
+@pytest.mark.parametrize("args,words", [
+    (("render", "hud-direct", "--secs", "3", "--out", "o"), "unrecognized arguments: --secs"),
+    (("sweep", "hud-direct", "--sets", "x=1:2:2", "--rays", "1000", "--out", "o"), "unrecognized arguments: --sets"),
+    (("render", "hud-direct", "--sec", "3"), "the following arguments are required: --out"),  # an abbreviation
+])
+def test_a_misspelt_option_is_named_before_a_missing_required_one(args, words, tmp_path):
+    """argparse checks required options before unknown ones: `render --secs 3` said only that --rays or
+    --seconds is required, which sends the user looking for the wrong mistake."""
+    res = subprocess.run([sys.executable, "-m", "tracer.cli", *args], cwd=tmp_path, capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1 and words in res.stderr, res.stderr
+    assert not (tmp_path / "o").exists()

@@ -496,9 +496,24 @@ def ray_count(text: str) -> int:
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2."""
+    """argparse with the one-line errors of the rest of the command line: "error: <what>", exit 2. A
+    misspelt option is named even where a required one is missing (argparse checks those first, so
+    `render --secs 3` said only that --rays or --seconds is required)."""
+
+    #: The arguments of the parse_args call running (a subcommand's parser is called inside it).
+    argv: list[str] = []
+
+    def parse_args(self, args=None, namespace=None):
+        Parser.argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_args(Parser.argv, namespace)
 
     def error(self, message):
+        if "required" in message:
+            known = self._option_string_actions  # an abbreviation of one of them is one of them
+            unknown = [a for a in Parser.argv if a.startswith("--")
+                       and not any(o.startswith(a.split("=")[0]) for o in known)]
+            if unknown:
+                message = f"unrecognized arguments: {' '.join(unknown)}"
         self.exit(EXIT_INPUT, f"error: {message} (see {self.prog} --help)\n")
 
 
