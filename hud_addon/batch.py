@@ -88,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
         outputs.close()
 
 
+def _blender_reason(error: RuntimeError) -> str:
+    """The first line of an operator's RuntimeError without Blender's "Error: " prefix."""
+    return str(error).splitlines()[0].removeprefix("Error: ").strip() if str(error) else ""
+
+
 def _render(args, blend: Path, outputs) -> int:
     """Open ``blend``, render it with Blender's pipeline into a temporary folder and commit the
     image and the report to ``outputs`` (a locked :class:`tracer.outputs.OutputSet`)."""
@@ -107,8 +112,8 @@ def _render(args, blend: Path, outputs) -> int:
     try:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
     except RuntimeError as e:  # not a .blend, or a truncated one: Blender's reason, on one line
-        reason = str(e).splitlines()[0].removeprefix("Error: ").strip() or "cannot be opened"
-        print(f"error: {blend}: not a readable .blend file ({reason})", file=sys.stderr)
+        print(f"error: {blend}: not a readable .blend file ({_blender_reason(e) or 'cannot be opened'})",
+              file=sys.stderr)
         return 2
     scene = bpy.context.scene
     scene.render.engine = "HUD_TRACER"
@@ -132,9 +137,8 @@ def _render(args, blend: Path, outputs) -> int:
         bpy.ops.render.render(write_still=True)
     except RuntimeError as e:  # the engine reported an error: Blender raises it in background mode
         if "error" not in engine.LAST_RENDER:  # Blender refused before the engine ran: the file's settings
-            reason = str(e).splitlines()[0].removeprefix("Error: ").strip()
-            print(f"error: {blend.name}: {reason} (Blender's check of the file's scene, camera and output)",
-                  file=sys.stderr)
+            print(f"error: {blend.name}: {_blender_reason(e)} (Blender's check of the file's scene, camera and "
+                  "output)", file=sys.stderr)
             return 2
     figures = dict(engine.LAST_RENDER)
     for w in figures.get("warnings", []):

@@ -307,14 +307,14 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     paths.sort(key=lambda p: -float(luminance3(p["luminance"].T).sum()))
     return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths, "pupil_samples": samples,
             "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()},
-            "aim_coverage": aim_coverage(world, method.ends)}
+            "ends": method.ends}
 
 
 def aim_coverage(world, ends: list[tuple]) -> dict[str, dict]:
     """For every object whose light paths are aimed (an emission's or a scattering material's
     ``aim``, tracer.optics.aimed): the share of what the analysed chains carry from it to the eye
-    (weighted as ``ChiefRays.ends`` says) that leaves it inside its aim target,
-    {name: {"target", "coverage", "weight"}} (weight: the sum of the chains' weights, to combine calls).
+    (``ends``: :attr:`ChiefRays.ends` of one or more calls, weighted as it says) that leaves it inside
+    its aim target, {name: {"target", "coverage"}}.
     Below 1, forward tracing finds the rest only through the unaimed share of its samples, in rare
     heavy particles: glass or a lens between the object and its target bends the aimed light off it
     (a plane slab brings an image t (1 - 1/n) nearer), or the target is smaller than what the eye
@@ -341,5 +341,4 @@ def aim_coverage(world, ends: list[tuple]) -> dict[str, dict]:
             entry = out.setdefault(o.name, {"target": aim.target, "inside": 0.0, "luminance": 0.0})
             entry["inside"] += float(lum[k][inside].sum())
             entry["luminance"] += total
-    return {name: {"target": e["target"], "coverage": e["inside"] / e["luminance"], "weight": e["luminance"]}
-            for name, e in out.items()}
+    return {name: {"target": e["target"], "coverage": e["inside"] / e["luminance"]} for name, e in out.items()}

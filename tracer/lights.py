@@ -41,8 +41,6 @@ MAX_CLUSTERS = 32
 DEFENSIVE = 0.1
 
 
-
-
 def _emission_check(params: dict, fail):
     if 0 < params.get("luminance", 0) < MIN_LUMINANCE:
         fail("luminance", f"a luminance of {params['luminance']:.3g} cd/m^2 is below {MIN_LUMINANCE:g} (give 0 for a "

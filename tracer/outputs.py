@@ -86,7 +86,6 @@ class OutputSet:
         in (the outputs would mix with, or overwrite, the scene's own files, and travel with the folder
         wherever it is copied or zipped)."""
         #: An empty name would be Path("."), the working directory: refused by :meth:`open`.
-        self._empty = isinstance(folder, str) and not folder.strip()
         self._given = folder
         self.folder = Path(folder)
         self.scene_root = None if scene_root is None else Path(scene_root)
@@ -98,7 +97,7 @@ class OutputSet:
     def open(self) -> OutputSet:
         """Check and lock the folder (creating it, and missing parents, if needed)."""
         folder = self.folder
-        if self._empty:
+        if isinstance(self._given, str) and not self._given.strip():
             what = "an empty folder name" if not self._given else "a folder name of blanks only"
             raise OutputFolderError(repr(self._given), f"{what}; give the output folder (\".\" for this one)")
         if "\0" in str(folder):

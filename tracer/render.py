@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .analysis import specular_paths
+from .analysis import aim_coverage, specular_paths
 from .errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from .hudfigures import erode, hud_figures
 from .imageio import read_exr_channels, read_image, write_exr, write_png
@@ -200,7 +200,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         masks["image"] = erode(reached.reshape(grid_h, grid_w))
         out["image_path"] = res["paths"][0]["path"]
     blockers = dict(res["specular_blockers"])
-    coverage: dict[str, list] = {}
+    ends = []  # where the sections' pupil rays end, for the aims' coverage
     for key, mask in masks.items():
         idx = np.nonzero(mask.ravel())[0]
         if len(idx) == 0:
@@ -209,8 +209,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment)
         for k, v in pup["specular_blockers"].items():
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
-        for name, c in pup["aim_coverage"].items():
-            coverage.setdefault(name, []).append(c)
+        ends += pup["ends"]
         p_total, p_per_path, p_through = _per_pixel(pup["paths"], len(sel))
         entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
         entry["section_pixels"] = int(len(idx))
@@ -253,8 +252,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         out["not_comparable"] += reasons
         out[key] = entry
     out["valid"] = not out["not_comparable"]
-    out["aim_coverage"] = {name: {"target": cs[0]["target"], "coverage": sum(c["coverage"] * c["weight"] for c in cs)
-                                  / sum(c["weight"] for c in cs)} for name, cs in coverage.items()}
+    out["aim_coverage"] = aim_coverage(world, ends)
     if lcd_paths:
         out["lcd_contrast_ratio"] = next(o.material.params["contrast_ratio"] for o in world.scene.objects
                                          if o.material.type == "lcd")

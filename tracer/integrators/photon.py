@@ -45,7 +45,7 @@ import math
 import numpy as np
 
 from ..film import Splats
-from ..optics.bsdf import DELTA, IMPORTANCE, RADIANCE, Interaction
+from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
 from ..schema import Field
 from ..units import luminance3
 from ..vec import F32, dot, take
@@ -466,7 +466,7 @@ class PhotonTracer(BackwardTracer):
                 f"{emitted:,} photon paths were cut at methods.photon.max_depth = {self.max_depth}: the light they "
                 "would carry is missing from the image (the photon method does not measure how much): raise max_depth")
         if vis == 0 and result.paths:
-            scattering = any(m.flags != 0 and not m.flags & DELTA for m in self.world.materials)
+            scattering = not all(m.delta for m in self.world.materials)
             why = (f"the eye paths were cut at methods.photon.max_depth = {self.max_depth} before any reached one: "
                    "raise it" if cut_eye and scattering else
                    "the image holds only the sources and environment seen through specular optics: use the backward "

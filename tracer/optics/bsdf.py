@@ -33,6 +33,9 @@ from .polar import DEPOLARISE, Mueller
 #: Transport modes.
 RADIANCE, IMPORTANCE = "radiance", "importance"
 
+#: Lobe flags (bits of ``BSDFSample.flags`` and ``BSDF.flags``).
+DELTA, REFLECTION, TRANSMISSION = 1, 2, 4
+
 
 def adjoint_shading_factor(it, wo: np.ndarray) -> np.ndarray:
     """(n,) the factor that makes a light path's scattering at shading normals the adjoint of a camera
@@ -45,9 +48,6 @@ def adjoint_shading_factor(it, wo: np.ndarray) -> np.ndarray:
     num = np.abs(dot(it.d, it.ns)) * np.abs(dot(wo, it.ng))
     den = np.abs(dot(it.d, it.ng)) * np.abs(dot(wo, it.ns))
     return np.where(den > 0, num / np.where(den > 0, den, 1), 0).astype(F32)
-
-#: Lobe flags (bits of ``BSDFSample.flags`` and ``BSDF.flags``).
-DELTA, REFLECTION, TRANSMISSION = 1, 2, 4
 
 
 @dataclass
