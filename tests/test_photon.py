@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from conftest import film_dof, t_bound, welch_dof
 
-from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle
+from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle, sphere
 from tracer.integrators import INTEGRATORS, Budget
-from tracer.integrators.photon import PhotonGrid, radius_schedule
+from tracer.integrators.path import PROBE_KEY
+from tracer.integrators.photon import REPLICATES, PhotonGrid, radius_schedule
 from tracer.scene import load_scene
 from tracer.units import Y_WEIGHTS
 from tracer.world import World
@@ -177,9 +178,11 @@ def test_stability_where_the_method_cannot_work(tmp_path):
 
 def test_paths_cut_at_max_depth_are_named_as_the_cause(tmp_path):
     """hud-direct with methods.photon.max_depth = 3: no eye path gets past the windshield and mirror to
-    the scatterer. The warnings name max_depth as the cause (the photon method has no probe of the cut
-    paths' light), not the scene (\"use the forward or backward method\"); at the default depth
-    nothing is cut and nothing is said."""
+    the scatterer. The warnings name max_depth as the cause of the cut eye paths (whose light is not
+    measured: they never reached a visibility point), not the scene (\"use the forward or backward
+    method\"); the photon paths cut there are probed, and with no visibility point to gather their
+    photons they add nothing, so nothing is said of them. At the default depth nothing is cut and
+    nothing is said."""
     from presets import PRESETS
 
     folder = PRESETS["hud-direct"].write(tmp_path / "s", resolution=(32, 16))
@@ -187,11 +190,61 @@ def test_paths_cut_at_max_depth_are_named_as_the_cause(tmp_path):
     options = dict(scene.method_options("photon")) | {"max_depth": 3}
     shallow = INTEGRATORS["photon"](scene, 1, options=options).render(Budget(rays=400_000))
     said = " ".join(shallow.warnings)
-    assert "photon paths were cut at methods.photon.max_depth = 3" in said and "raise max_depth" in said, said
+    assert "eye paths (from 1,024 samples, split at glass) were cut at methods.photon.max_depth = 3" in said, said
+    assert "raise max_depth" in said, said
     assert "the eye paths were cut at methods.photon.max_depth = 3 before any reached one" in said, said
     assert "use the forward or backward method" not in said
+    cut = shallow.extra["max_depth_cut"]
+    assert cut["paths"] == shallow.extra["photon"]["photon_paths_cut_at_max_depth"] > 0, cut
+    assert cut["missing_luminance_cd_m2"] == 0.0 and "photon paths were cut" not in said, (cut, said)
     deep = INTEGRATORS["photon"](load_scene(folder), 1).render(Budget(rays=400_000))
     assert deep.extra["photon"]["eye_paths_cut_at_max_depth"] == 0 and not any("cut" in w for w in deep.warnings)
+
+
+def _room(folder, rho: float, luminance: float = 10.0):
+    """The eye at the centre of a closed sphere (radius 500 mm) whose inside is Lambertian of reflectance
+    ``rho`` and emits ``luminance``: a scattering furnace, L = luminance (1 + rho + rho^2 + ...) in
+    every direction, where light bounce k (k reflections) brings luminance rho^k."""
+    sb = SceneBuilder(folder, "room", "a closed Lambertian room that glows")
+    sb.add("wall", sphere(500.0, subdivisions=3, inward=True), {"type": "lambertian", "reflectance": [rho] * 3},
+           emission={"luminance": luminance})
+    return sb.write(eye={"position": [0.0, 0.0, 0.0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                         "resolution": [4, 4], "fov_deg": [10.0, 10.0]})
+
+
+def test_photon_paths_end_by_roulette_and_cut_ones_are_measured(tmp_path):
+    """Photons never leave a closed room, so without a roulette every photon path ran to max_depth and
+    the warning blamed max_depth whatever the light cut there was worth (a hand-built scene). In a
+    room of reflectance 0.5 the path loop's roulette ends them: under 0.1 % reach the default depth,
+    and the image reads the furnace's L_e / (1 - rho). With max_depth 4 in a room of 0.8, the image
+    holds bounces 0 to 4, L_e (1 - rho^5) / (1 - rho), the probe's photons (the cut paths followed
+    16 segments further) gather the next sixteen, L_e rho^5 (1 - rho^16) / (1 - rho), each batch an
+    unbiased estimate of it, and the warning gives that figure as a lower bound."""
+    lum = 10.0
+    bound = lambda dof: t_bound(3, dof)  # noqa: E731  (three comparisons in this test)
+    res = INTEGRATORS["photon"](load_scene(_room(tmp_path / "half", 0.5, lum)), 3, 8192).render(Budget(rays=2_000_000))
+    mean, se = float(res.film.rgb().mean(axis=(0, 1)) @ Y_WEIGHTS), res.film.mean_standard_error()
+    assert abs(mean - lum / 0.5) < bound(film_dof(res.film)) * se, (mean, se)
+    photon = res.extra["photon"]
+    assert photon["photon_paths_cut_at_max_depth"] < 1e-3 * photon["photons_emitted"], photon
+    assert not any("cut at" in w for w in res.warnings), res.warnings
+
+    rho, depth = 0.8, 4
+    world = World(load_scene(_room(tmp_path / "bright", rho, lum)))
+    options = dict(world.scene.method_options("photon")) | {"max_depth": depth}
+    integ = INTEGRATORS["photon"](world, 3, 8192, options=options)
+    res = integ.render(Budget(rays=1_000_000))
+    mean, se = float(res.film.rgb().mean(axis=(0, 1)) @ Y_WEIGHTS), res.film.mean_standard_error()
+    assert abs(mean - lum * (1 - rho ** (depth + 1)) / (1 - rho)) < bound(film_dof(res.film)) * se, (mean, se)
+    cut = res.extra["max_depth_cut"]
+    assert cut["paths"] == res.extra["photon"]["photons_emitted"] and cut["missing_is_lower_bound"], cut
+    assert any(w.startswith(f"{cut['paths']:,} photon paths were cut at methods.photon.max_depth = 4") and
+               "add at least" in w for w in res.warnings), res.warnings
+    per_pixel = REPLICATES * world.eye.width * world.eye.height  # the photon component's samples in a batch
+    missing = np.array([integ.trace_batch(k).extra[f"{PROBE_KEY}:photon"] / per_pixel for k in range(24)])
+    expected = lum * rho ** (depth + 1) * (1 - rho ** 16) / (1 - rho)
+    se = missing.std(ddof=1) / math.sqrt(len(missing))
+    assert abs(missing.mean() - expected) < bound(len(missing) - 1) * se and se < 0.03 * expected, (missing, expected)
 
 
 def test_a_scene_of_glass_alone_is_not_blamed_on_max_depth(tmp_path):

@@ -334,14 +334,16 @@ class Integrator:
         if missing > 2 * se:
             share = f" ({missing / mean:.2%} of it)" if mean > 0 else ""
             trapped = (f"; {still:,} of them were still going after those segments (trapped, as between the faces "
-                       "of glass), so the bias may be larger" if still else "")
+                       "of glass or the walls of a closed room), so the bias may be larger" if still else "")
             result.warnings.append(
-                f"{cut:,} paths were cut at methods.{self.name}.max_depth = {self.max_depth}; followed "
+                f"{cut:,} {self.probed_paths} were cut at methods.{self.name}.max_depth = {self.max_depth}; followed "
                 f"{PROBE_DEPTH} segments further they add {'at least ' if still else ''}{missing:.3g} cd/m^2 to the "
                 f"image mean{share}, {missing / se if se > 0 else math.inf:.1f} times its standard error: the image "
                 f"is biased low; raise max_depth{trapped}")
 
     found_what = "found light"
+    #: What the max-depth probe follows (its warning's noun).
+    probed_paths = "paths"
 
 
 class LocalExecutor:

@@ -229,6 +229,11 @@ class PathMethod:
         (for :class:`Roulette`)."""
         return np.full(beta.shape[1], np.inf)
 
+    def probe(self, state: PathState, ctx) -> None:
+        """Measure what the paths ``state``, cut at max_depth, would still have carried (default:
+        :func:`probe_cut`, into ``ctx.store``)."""
+        probe_cut(self, state, ctx)
+
 
 @dataclass
 class Context:
@@ -431,7 +436,8 @@ def _hooked(method: PathMethod, hook: str) -> bool:
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, probe: bool = True) -> int:
     """Run paths through the loop until they end or reach ``max_depth`` segments; returns the number
     of paths still alive at the limit (cut: a bias). With ``probe`` and a ``ctx.probe_rng``, the cut
-    paths are followed further into a tally (:func:`probe_cut`) that measures that bias."""
+    paths are followed further into a tally (the method's :meth:`PathMethod.probe`, by default
+    :func:`probe_cut`) that measures that bias."""
     world, timers = ctx.world, ctx.timers
     accel = world.accel
     materials = world.materials
@@ -509,5 +515,5 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
         with timers("shade"):
             state = _compact(method, nxt, ctx)
     if len(state) and probe and ctx.probe_rng is not None:
-        probe_cut(method, state, ctx)
+        method.probe(state, ctx)
     return len(state)

@@ -52,7 +52,18 @@ from ..vec import F32, dot, take
 from .backward import BackwardTracer
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
 from .forward import Particles
-from .path import Context, PathMethod, PathState, Timers, continue_by_sampling, trace
+from .path import (
+    CUT_KEY,
+    PROBE_DEPTH,
+    PROBE_KEY,
+    STILL_KEY,
+    Context,
+    PathMethod,
+    PathState,
+    Timers,
+    continue_by_sampling,
+    trace,
+)
 
 #: Independent replicates per batch: eye passes over all pixels, each with its own share of photons.
 REPLICATES = 2
@@ -76,11 +87,14 @@ FOOTPRINT_PIXELS = 1 << 14
 #: The radius never falls below this fraction of r_0 (a guard; the schedule reaches it only after
 #: about 10^18 batches).
 MIN_RADIUS_FRACTION = 1e-3
-#: Paths cut at max_depth are warned of above this share of the eye samples or of the photons (the
-#: photon method has no probe of the light they carry, unlike forward and backward tracing).
+#: Eye paths cut at max_depth are warned of above this share of the eye samples (their light is not
+#: probed: a cut eye path never reached its visibility point). Photon paths cut there are probed
+#: (:meth:`PhotonPass.probe`) and warned of by what they would add, as forward and backward tracing's.
 CUT_WARN_SHARE = 1e-3
-#: The ctx.store keys of the photon figures (summed over batches).
-STORE_KEYS = ("photons_emitted", "photons_stored", "visibility_points", "photons_gathered", "photon_paths_cut")
+#: The ctx.store keys of the photon figures (summed over batches); "photon_flux_gathered" is the sum
+#: of the luminance of the flux (cd/m^2 mm^2 sr) of every photon gathered, once per gathering point.
+STORE_KEYS = ("photons_emitted", "photons_stored", "visibility_points", "photons_gathered", "photon_paths_cut",
+              "photon_flux_gathered")
 
 
 def _tally(ctx, key: str, count: int):
@@ -167,14 +181,39 @@ class PhotonGrid:
 class PhotonPass(PathMethod):
     """The photon pass's hooks on the path loop: particles carry flux (IMPORTANCE), and every
     non-specular vertex they reach stores a photon (after the particle's first event, or from its
-    first segment on when direct light is left to the photons)."""
+    first segment on when direct light is left to the photons).
+
+    Photons go through the path loop's one Russian roulette (:class:`tracer.integrators.path.Roulette`):
+    a photon's ``potential`` is its flux's luminance times ``scale``, the image's mean luminance per
+    unit of the mean flux of the photons its pilot gathered, so that a photon is thinned where it
+    carries less than Roulette.EPSILON of what a typical gathered photon does. Paths cut at max_depth
+    are followed further into ``probe_stored`` (:meth:`probe`), whose photons the eye pass gathers
+    into a tally kept out of the image."""
 
     mode = IMPORTANCE
 
-    def __init__(self, particles: Particles, store_direct: bool):
+    def __init__(self, particles: Particles, store_direct: bool, scale: float = math.inf):
         self.particles = particles
         self.store_direct = store_direct
+        self.scale = scale
         self.stored: list[tuple] = []
+        self.probe_stored: list[tuple] = []
+
+    def potential(self, beta):
+        return luminance3(beta) * self.scale
+
+    def probe(self, state, ctx):
+        """Follow the cut paths PROBE_DEPTH more segments on the probe's random stream, storing their
+        photons into ``probe_stored``; the cut and still-going counts go to ``ctx.store`` as the
+        default probe's do (tracer.integrators.path.probe_cut)."""
+        rng, stored = ctx.rng, self.stored
+        ctx.rng, self.stored = ctx.probe_rng, self.probe_stored
+        try:
+            still = trace(self, state, ctx, PROBE_DEPTH, probe=False)
+        finally:
+            ctx.rng, self.stored = rng, stored
+        ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
+        ctx.store[STILL_KEY] = ctx.store.get(STILL_KEY, 0) + still
 
     def connect(self, state, it, bsdf, ctx):
         keep = np.flatnonzero(state.extra["scattered"] | self.store_direct)
@@ -213,6 +252,7 @@ class PhotonTracer(BackwardTracer):
     efficiency_definition = ("retina samples that reached a source, connected to one or gathered a photon / "
                              "samples")
     found_what = "found light (a source, a connection or a photon)"
+    probed_paths = "photon paths"
 
     def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)
@@ -224,6 +264,8 @@ class PhotonTracer(BackwardTracer):
         self.particles = Particles(w) if can_emit else None
         self._vis: list[tuple] = []
         self._footprint_pass = False
+        #: The photon pass's roulette scale (PhotonPass.potential), set by the pilot (:meth:`pilot_mean`).
+        self.photon_scale = math.inf
         if not w.environment.is_black:
             self.warnings.append("the photon method's photons leave the lights only: environment light that reaches "
                                  "a scattering surface after a bounce is not counted (what the eye sees of the "
@@ -317,24 +359,32 @@ class PhotonTracer(BackwardTracer):
         return radius_schedule(self.r0, self.alpha, batch)
 
     # -- the batch ---------------------------------------------------------------------------------
-    def _photons(self, ctx, n: int, replicates: int, radius: float) -> PhotonGrid | None:
-        """The photon pass: n particles dealt into ``replicates``; their photons in a grid."""
+    def _photons(self, ctx, n: int, replicates: int, radius: float) -> tuple[PhotonGrid | None, PhotonGrid | None]:
+        """The photon pass: n particles dealt into ``replicates``, with the batch's roulette; their
+        photons in a grid, and those of the paths cut at max_depth and followed further (where the
+        batch has a probe stream) in a second: (grid, probe grid), either None where empty."""
         if self.particles is None or n == 0:
-            return None
-        pp = PhotonPass(self.particles, store_direct=not self.next_event)
-        pctx = Context(self.world, ctx.rng, ctx.timers)
+            return None, None
+        pp = PhotonPass(self.particles, store_direct=not self.next_event, scale=self.photon_scale)
+        pctx = Context(self.world, ctx.rng, ctx.timers, roulette=ctx.roulette, store=ctx.store,
+                       probe_rng=ctx.probe_rng)
         cut = 0
         for a in range(0, n, WAVE):
             state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
             state.extra["scattered"] = np.zeros(len(state), bool)
-            cut += trace(pp, state, pctx, self.max_depth, probe=False)
+            cut += trace(pp, state, pctx, self.max_depth)
         _tally(ctx, "photons_emitted", n)
         _tally(ctx, "photon_paths_cut", cut)
-        if not pp.stored:
-            return None
-        arrays = [np.concatenate(parts, axis=-1) for parts in zip(*pp.stored, strict=True)]
-        _tally(ctx, "photons_stored", arrays[0].shape[1])
-        return PhotonGrid(*arrays, radius)
+
+        def grid(stored):
+            if not stored:
+                return None
+            return PhotonGrid(*(np.concatenate(parts, axis=-1) for parts in zip(*stored, strict=True)), radius)
+
+        main = grid(pp.stored)
+        if main is not None:
+            _tally(ctx, "photons_stored", len(main))
+        return main, grid(pp.probe_stored)
 
     def _gather(self, ctx, grid: PhotonGrid | None, vis: list[tuple], per_replicate: np.ndarray,
                 counts: list | None = None):
@@ -372,10 +422,12 @@ class PhotonTracer(BackwardTracer):
                 cos = np.abs(dot(d_ph, sub.ng))
                 fcos = bsdf.eval(sub, -d_ph, RADIANCE)
                 f = np.divide(fcos, cos, out=np.zeros(fcos.shape, np.float64), where=cos > 0)
-                contrib = f * grid.beta[:, ph]
+                flux = grid.beta[:, ph]
+                contrib = f * flux
                 for c in range(3):
                     gathered[c] += np.bincount(pt, weights=contrib[c], minlength=len(it))
                 per_point_found += np.bincount(pt, minlength=len(it))
+                _tally(ctx, "photon_flux_gathered", float(luminance3(flux).sum()))
             _tally(ctx, "photons_gathered", gathered_pairs)
             if counts is not None:
                 counts.append(per_point_found)
@@ -385,10 +437,17 @@ class PhotonTracer(BackwardTracer):
     def _batch(self, ctx, pix: np.ndarray, rep: np.ndarray, replicates: int, photons: int, radius: float,
                counts: list | None = None) -> int:
         """Photons gathered at ``radius`` (mm), then eye samples through ``pix`` (replicates ``rep``)
-        gathered wave by wave; the samples that found light."""
-        grid = self._photons(ctx, photons, replicates, radius)
+        gathered wave by wave; the samples that found light. The photons of paths cut at max_depth
+        and followed further (the probe) are gathered at the same points into a tally of their
+        luminance per component (``ctx.store``, as tracer.integrators.path.probe_cut keeps it), which
+        the image never sees."""
+        grid, probe_grid = self._photons(ctx, photons, replicates, radius)
         per_replicate = np.array([len(range(r, photons, replicates)) for r in range(replicates)], np.float64)
         ctx.sample_found = np.zeros(len(pix), bool)
+        probe_ctx = None
+        if probe_grid is not None:
+            probe_ctx = Context(self.world, ctx.rng, ctx.timers, Splats())
+            probe_ctx.sample_found = np.zeros(len(pix), bool)
         for a in range(0, len(pix), WAVE):
             b = min(a + WAVE, len(pix))
             self._vis = []
@@ -399,7 +458,13 @@ class PhotonTracer(BackwardTracer):
             _tally(ctx, "visibility_points", sum(len(v[2]) for v in self._vis))
             with ctx.timers("film"):
                 self._gather(ctx, grid, self._vis, np.maximum(per_replicate, 1), counts)
+                if probe_ctx is not None:
+                    self._gather(probe_ctx, probe_grid, self._vis, np.maximum(per_replicate, 1))
             self._vis = []
+        if probe_ctx is not None:
+            for comp in probe_ctx.splats.parts:
+                key = f"{PROBE_KEY}:{comp}"
+                ctx.store[key] = ctx.store.get(key, 0.0) + float(luminance3(probe_ctx.splats.gather(comp)[2]).sum())
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):
@@ -412,7 +477,9 @@ class PhotonTracer(BackwardTracer):
 
     def pilot_mean(self, ctx) -> float:
         """r_0 (from the footprint, on the pilot's stream), then the image's mean luminance (cd/m^2) from
-        ``batch_size`` photons gathered at as many random pixels, at radius r_0."""
+        ``batch_size`` photons gathered at as many random pixels, at radius r_0; also the photon pass's
+        roulette scale (:class:`PhotonPass`): that mean over the mean luminance of the flux of the
+        photons gathered (infinite, so that no photon is thinned, where none was gathered)."""
         if self.r0 is None:
             self.r0 = self.initial_radius(ctx.rng)
         n = self.batch_size
@@ -420,7 +487,10 @@ class PhotonTracer(BackwardTracer):
         pix = ctx.rng.integers(0, self.npix, k)
         self._batch(ctx, pix, np.zeros(k, np.int64), 1, n, self.r0)
         total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)
-        return total / k
+        mean = total / k
+        pairs, flux = ctx.store.get("photons_gathered", 0), ctx.store.get("photon_flux_gathered", 0.0)
+        self.photon_scale = mean / (flux / pairs) if pairs and flux > 0 and mean > 0 else math.inf
+        return mean
 
     # -- hooks of the path loop (eye pass) ---------------------------------------------------------
     def connect(self, state, it, bsdf, ctx):
@@ -459,12 +529,13 @@ class PhotonTracer(BackwardTracer):
         total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)
         result.extra["component_shares"] = {
             c: (float(luminance3(film.sums[c]).sum()) / total if total > 0 else 0.0) for c in self.components}
-        cut_eye, cut_photons, emitted = int(self.truncated), figures["photon_paths_cut"], figures["photons_emitted"]
-        if cut_eye > CUT_WARN_SHARE * max(result.paths, 1) or cut_photons > CUT_WARN_SHARE * max(emitted, 1):
+        cut_eye, emitted = int(self.truncated), figures["photons_emitted"]
+        if cut_eye > CUT_WARN_SHARE * max(result.paths, 1):
             result.warnings.append(
-                f"{cut_eye:,} eye paths (from {result.paths:,} samples, split at glass) and {cut_photons:,} of "
-                f"{emitted:,} photon paths were cut at methods.photon.max_depth = {self.max_depth}: the light they "
-                "would carry is missing from the image (the photon method does not measure how much): raise max_depth")
+                f"{cut_eye:,} eye paths (from {result.paths:,} samples, split at glass) were cut at "
+                f"methods.photon.max_depth = {self.max_depth} before they reached a scattering surface: the light "
+                "they would find is missing from the image (an eye path cut there has no visibility point, so its "
+                "light is not measured): raise max_depth")
         if vis == 0 and result.paths:
             scattering = not all(m.delta for m in self.world.materials)
             why = (f"the eye paths were cut at methods.photon.max_depth = {self.max_depth} before any reached one: "
