@@ -30,7 +30,7 @@ import numpy as np
 from ..tracer.errors import SceneError, StoppedBeforeFirstBatch, TracerError
 from ..tracer.falsecolour import false_colour, png_file, write_as_set
 from ..tracer.integrators import INTEGRATORS, Budget
-from ..tracer.render import finite_json, render_products, run_render
+from ..tracer.render import aim_preflight, finite_json, render_products, run_render
 from ..tracer.scene import load_scene
 from ..tracer.units import Y_WEIGHTS
 from ..tracer.validate import WorkersError, check_workers
@@ -142,6 +142,8 @@ def render_final(engine, depsgraph) -> dict:
             return _fail(engine, scene, f"Render Properties > Performance > Threads: {e}")
         world = World(tracer_scene)
         integrator = INTEGRATORS[s.method](world, s.seed)
+        for w in aim_preflight(world, s.method, integrator.renders_environment):
+            engine.report({"WARNING"}, f"HUD Tracer: before the first ray: {w}")
         for name, (channels, chan_id, _) in passes_of(s.method).items():
             engine.add_pass(name, channels, chan_id)
         rr = engine.begin_result(0, 0, width, height)

@@ -738,6 +738,20 @@ def scenario_no_light():
     return {"figures": figures, "reports": stub.reports}
 
 
+def scenario_misaimed():
+    """analytic-mirror with its pupil image (the panel's aim target) shrunk to half its size, rendered
+    forward: what the engine reports, before the first ray and after the render."""
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    scene = bpy.context.scene
+    bpy.data.objects["pupil_image"].scale = (0.5, 0.5, 0.5)
+    scene.hud.method, scene.hud.budget, scene.hud.rays = "forward", "RAYS", 200_000
+    stub = StubEngine(stop_after=10**9)
+    figures = sys.modules[f"{module}.hud_addon.engine"].render_final(stub, bpy.context.evaluated_depsgraph_get())
+    disable(module)
+    return {"figures": figures, "reports": stub.reports}
+
+
 def scenario_unregister():
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     before = hud_names()

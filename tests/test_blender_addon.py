@@ -352,6 +352,17 @@ def test_render_reports_no_light_to_the_user():
     assert any("the scene has no light source" in r for r in res["reports"])  # its one emitter is at 0 cd/m^2
 
 
+def test_an_aim_that_misses_light_is_reported_when_the_render_starts():
+    """The panel's aim target shrunk to half its size covers about a quarter of the light that reaches
+    the eye: the engine reports it before the first ray (first of its reports), and again after the
+    render from the report's own analysis."""
+    res, _ = scenario("misaimed")
+    early = [i for i, r in enumerate(res["reports"])
+             if r.startswith("HUD Tracer: before the first ray: the aim of panel toward pupil_image covers")]
+    late = [r for r in res["reports"] if r.startswith("HUD Tracer: the aim of panel toward pupil_image covers")]
+    assert early == [0] and len(late) == 1, res["reports"]
+
+
 def _vertex_set(v) -> np.ndarray:
     """Distinct vertex positions (n, 3) mm, sorted: meshes exported with UVs repeat corner vertices."""
     return np.unique(np.round(np.asarray(v, dtype=np.float64), 3), axis=0)

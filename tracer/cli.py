@@ -197,7 +197,9 @@ def cmd_render(args) -> int:
                 print(f"warning: {crowded}", file=sys.stderr)
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
                                           should_stop=flag, batch_size=args.batch_size, workers=args.workers,
-                                          analyse=not args.no_analysis)
+                                          analyse=not args.no_analysis,
+                                          notice=lambda w: print(f"warning: before the first ray: {w}",
+                                                                 file=sys.stderr, flush=True))
     except StoppedBeforeFirstBatch as e:
         if bar:
             bar.close()
