@@ -265,15 +265,20 @@ class BackwardTracer(Integrator, PathMethod):
         s = a2 + b2
         return np.where(s > 0, a2 / np.where(s > 0, s, 1.0), 0.0)
 
-    def escaped(self, state, ctx):
+    def escaped(self, state, ctx, component: str = "hit"):
+        """The environment behind paths that left the scene, weighted against next-event estimation's
+        samples of it (power heuristic) where their last vertex scattered; into ``component``."""
         if self.env.is_black:
             return
         value = state.beta * self.env.radiance(state.d)
         if self.nee_env:
             value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, self.env.pdf(state.d)))
-        self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
+        self._add(ctx, component, state.owner, state.rep, state.extra["sample"], value)
 
-    def emitted(self, state, tri, p, t, ctx):
+    def emitted(self, state, tri, p, t, ctx, component: str = "hit"):
+        """The emission of light triangles ``tri`` that paths hit after a segment of length ``t``,
+        weighted against next-event estimation's samples of them (power heuristic) where their last
+        vertex scattered; into ``component``."""
         beta = state.beta
         if self.world.polar is not None and "stokes" in state.extra:
             beta = self.world.polar.emitted(beta, state.extra, state.d, self.lights.slot[tri])
@@ -282,7 +287,7 @@ class BackwardTracer(Integrator, PathMethod):
             cos_y = np.abs(dot(state.d, take(self.lights.tris.normal, tri)))
             p_light = solid_angle_pdf(self.lights.pdf_power_area(tri), t, cos_y)
             value = value * np.where(state.specular, 1.0, self._power_heuristic(state.pdf, p_light))
-        self._add(ctx, "hit", state.owner, state.rep, state.extra["sample"], value)
+        self._add(ctx, component, state.owner, state.rep, state.extra["sample"], value)
 
     def connect(self, state, it, bsdf, ctx):
         if not self.next_event:
