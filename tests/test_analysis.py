@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import edit_json, render, z_bound
+from conftest import edit_json, render, t_bound, z_bound
 
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle, write_obj
 from tracer.integrators import INTEGRATORS, Budget
@@ -260,7 +260,7 @@ def test_the_quadrature_is_coarse_only_where_the_light_is_small_for_its_distance
     world = World(load_scene(hud_with_sky))
     levels = analysis.quadrature_levels(world)
     assert levels.shape == (world.lights.tris.area.shape[0],) and np.all(levels == 1)
-    pts, _, weights, _, _ = world.lights.quadrature(levels)
+    pts, _, weights, _, _, _ = world.lights.quadrature(levels)
     assert weights.sum() == pytest.approx(world.lights.tris.area.sum(), rel=1e-12)
     zeros = np.zeros((world.eye.height, world.eye.width))
     adaptive = brightness_theorem(world, zeros, zeros, environment=False)
@@ -279,6 +279,94 @@ def test_a_large_light_close_to_a_screen_keeps_the_fine_quadrature(tmp_path):
     folder = condenser_scene(tmp_path / "s")
     edit_json(folder, lambda d: d.update(objects=[o for o in d["objects"] if o["name"] != "glass"]))
     assert np.all(analysis.quadrature_levels(World(load_scene(folder))) == 4)
+
+
+def _backlit_screen(folder, gap_mm: float):
+    """A Lambertian transmitter (tau 0.5) at z = 0 over a 200 mm square panel of 1000 cd/m^2 (two
+    triangles) ``gap_mm`` below it, seen from 500 mm above through 16 x 16 pixels of 2 deg."""
+    sb = SceneBuilder(folder, "backlight", "a screen over a panel")
+    sb.add("screen", rectangle(600.0, 600.0)[:2], {"type": "lambertian_transmitter", "transmittance": 0.5})
+    sb.add("panel", rectangle(200.0, 200.0)[:2], {"type": "absorber"}, frame_matrix([0, 0, -gap_mm], [1, 0, 0],
+                                                                                   [0, 0, 1]),
+           emission={"luminance": 1000.0})
+    return sb.write(eye={"position": [0.0, 0.0, 500.0], "gaze": [0, 0, -1], "up": [0, 1, 0], "pupil_diameter_mm": 4.0,
+                         "accommodation_distance_mm": 500.0, "resolution": [16, 16], "fov_deg": [2.0, 2.0]})
+
+
+def _square_view_factor(half: float, gap: float) -> float:
+    """E / (pi L) on the axis of a uniform square of half-side ``half`` at distance ``gap`` (Lambert's
+    contour formula: E = (L / 2) sum over edges of theta_i n . (R_i x R_i+1) / |R_i x R_i+1|)."""
+    corners = np.array([[-half, -half, -gap], [half, -half, -gap], [half, half, -gap], [-half, half, -gap]])
+    r1 = np.roll(corners, -1, axis=0)
+    c = np.cross(corners, r1)
+    theta = np.arccos((corners * r1).sum(1) / (np.linalg.norm(corners, axis=1) * np.linalg.norm(r1, axis=1)))
+    return float(abs((theta * c[:, 2] / np.linalg.norm(c, axis=1)).sum()) / (2 * math.pi))
+
+
+def test_a_light_closer_than_the_quadrature_resolves_is_not_compared(tmp_path):
+    """A screen 1 mm over a 200 mm panel: the finest quadrature (cells of 71 mm) predicted 2354 cd/m^2 where
+    the screen reads 500 (tau L times a view factor of 0.99995), and warned that a correct render
+    missed light (a hand-built scene). The section is now marked not comparable, with the reason, and
+    the render gets no missing-light warning. 30 mm away (cells 2.4 times the distance: 3.4 % off) it is
+    not compared either; 600 mm away (cells 0.12 of it) it is, and the prediction is Lambert's."""
+    from tracer.render import render_scene
+
+    report, _ = render_scene(load_scene(_backlit_screen(tmp_path / "near", 1.0)), "backward", Budget(rays=300_000),
+                             1, tmp_path / "o")
+    bt = report["brightness_theorem"]
+    assert not bt["valid"] and bt["image"]["rendered_over_predicted"] is None, bt["not_comparable"]
+    assert "closer to the scattering surfaces than the analysis' quadrature resolves" in bt["not_comparable"][0]
+    assert not any("of the brightness-theorem prediction" in w for w in report["warnings"]), report["warnings"]
+    lum = report["luminance"]
+    bound = t_bound(1, report["replicates"] - 1) * lum["mean_standard_error"]
+    assert abs(lum["mean"] - 500 * _square_view_factor(100.0, 1.0)) < bound < 1.0, lum
+    zeros = np.zeros((16, 16))
+    middle = brightness_theorem(World(load_scene(_backlit_screen(tmp_path / "middle", 30.0))), zeros, zeros)
+    assert not middle["valid"] and "quadrature resolves" in middle["not_comparable"][0]
+    far = brightness_theorem(World(load_scene(_backlit_screen(tmp_path / "far", 600.0))), zeros, zeros)
+    assert far["valid"] and far["image"]["predicted_cd_m2"] == pytest.approx(500 * _square_view_factor(100.0, 600.0),
+                                                                               rel=5e-3)
+
+
+def _sunlit_road(folder, glass: bool = False):
+    """A Lambertian road (rho 0.2, 40 m square) 1.2 m under the eye, seen 15 to 29 m away, under a sun
+    of 100,000 lx at 30 deg elevation and a uniform sky of 1000 cd/m^2: rho (E sin h / pi + L_sky).
+    ``glass``: a 5 mm glass roof 100 mm over the road along the view (the sky and the sun reach the
+    road in view only through it)."""
+    sb = SceneBuilder(folder, "road", "a sunlit road")
+    sb.add("road", rectangle(40000.0, 40000.0)[:2], {"type": "lambertian", "reflectance": 0.2},
+           frame_matrix([0, 20000.0, 0], [1, 0, 0], [0, 0, 1]))
+    if glass:
+        sb.add("roof", box(4000.0, 40000.0, 5.0), {"type": "dielectric", "ior": 1.52},
+               frame_matrix([0, 20000.0, 100.0], [1, 0, 0], [0, 0, 1]))
+    h, phi = math.radians(30.0), math.radians(20.0)
+    sun = [math.cos(h) * math.sin(phi), -math.cos(h) * math.cos(phi), math.sin(h)]
+    return sb.write(eye={"position": [0, 0, 1200.0], "gaze": [0, 20000.0, -1200.0], "up": [0, 0, 1],
+                         "pupil_diameter_mm": 4.0, "accommodation_distance_mm": 20000.0, "resolution": [8, 8],
+                         "fov_deg": [1.0, 1.0]},
+                    environment={"type": "uniform", "luminance": 1000.0,
+                                 "sun": {"direction": sun, "illuminance_lux": 1e5}})
+
+
+def test_the_environment_lights_scattering_surfaces_in_the_prediction(tmp_path):
+    """The analysis left the sky and the sun out of what scattering surfaces receive and still compared
+    the road: 135 cd/m^2 predicted behind a windshield where 3061 were rendered, marked valid (a
+    hand-built scene). It now draws 32 directions from the environment at each surface point: the
+    road is predicted at rho (E sin h / pi + L_sky) within its standard error and agrees with backward
+    tracing. Under a glass roof, which the analysis does not follow, the section is not compared."""
+    from tracer.render import render_scene
+
+    expected = 0.2 * (1e5 * math.sin(math.radians(30.0)) / math.pi + 1000.0)
+    report, _ = render_scene(load_scene(_sunlit_road(tmp_path / "road")), "backward", Budget(rays=1_000_000), 1,
+                             tmp_path / "o")
+    image = report["brightness_theorem"]["image"]
+    assert report["brightness_theorem"]["paths"][0]["path"] == "road:scatter", report["brightness_theorem"]["paths"]
+    se = image["predicted_standard_error_cd_m2"]
+    assert abs(image["predicted_cd_m2"] - expected) < z_bound(2) * se < 0.005 * expected, image
+    assert abs(image["rendered_minus_predicted_sigma"]) < z_bound(2), image
+    zeros = np.zeros((8, 8))
+    roofed = brightness_theorem(World(load_scene(_sunlit_road(tmp_path / "roof", glass=True))), zeros, zeros)
+    assert not roofed["valid"] and "road (through roof)" in roofed["not_comparable"][0], roofed["not_comparable"]
 
 
 def test_readouts_give_the_reports_figures(preset, tmp_path):

@@ -184,9 +184,13 @@ def test_uniform_environment_sampling():
 
 def test_quadrature_weights_cover_every_light():
     table = LightTable(LIGHTS)
-    pts, normals, weights, radiance, two = table.quadrature(4)
+    pts, normals, weights, radiance, two, size = table.quadrature(4)
     assert weights.sum() == pytest.approx(sum(o.area_mm2 for o in LIGHTS), rel=1e-12)
-    assert pts.shape[1] == len(weights) == radiance.shape[1] == len(two) == normals.shape[1]
+    assert pts.shape[1] == len(weights) == radiance.shape[1] == len(two) == normals.shape[1] == len(size)
+    # Cells similar to their triangle, a quarter of its edges: the longest edge over 4, area over 16.
+    t = table.tris
+    longest = np.maximum.reduce([np.linalg.norm(e, axis=0) for e in (t.e1, t.e2, t.e2 - t.e1)])
+    np.testing.assert_allclose(np.sort(size), np.sort(np.repeat(longest / 4, 16)), rtol=1e-12)
 
 
 def test_chi2_cosine_emission():

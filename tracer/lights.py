@@ -273,9 +273,10 @@ class LightTable:
     # -- the brightness-theorem analysis --------------------------------------------------------
     def quadrature(self, level: int | np.ndarray = 4):
         """Deterministic quadrature of every light triangle: points (3, q), normals (3, q), weights
-        (q,) mm^2, radiance (3, q), two-sided flags (q,): the midpoints of a level x level subdivision
-        of each triangle into equal-area cells (centroid rule, exact for linear integrands). ``level``
-        is one for all triangles or one per triangle (T,)."""
+        (q,) mm^2, radiance (3, q), two-sided flags (q,), cell sizes (q,) mm (the longest edge of the
+        cell): the midpoints of a level x level subdivision of each triangle into equal-area cells
+        similar to it (centroid rule, exact for linear integrands). ``level`` is one for all triangles
+        or one per triangle (T,)."""
         t = self.tris
         levels = np.broadcast_to(np.asarray(level, dtype=np.int64), (len(t),))
         parts = []
@@ -291,8 +292,10 @@ class LightTable:
             c = b.shape[1]
             v0, e1, e2 = (take(a, idx)[:, :, None] for a in (t.v0, t.e1, t.e2))
             pts = (v0 + b[0] * e1 + b[1] * e2).reshape(3, -1)
+            longest = np.maximum.reduce([norm(e) for e in (t.e1, t.e2, t.e2 - t.e1)])
             parts.append((pts, *(np.repeat(take(a, idx), c, axis=-1)
-                                 for a in (t.normal, t.area / c, self.radiance, self.two_sided))))
+                                 for a in (t.normal, t.area / c, self.radiance, self.two_sided, longest / lv))))
         if not parts:
-            return np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0), np.zeros((3, 0)), np.zeros(0, bool)
+            return (np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0), np.zeros((3, 0)), np.zeros(0, bool),
+                    np.zeros(0))
         return tuple(np.concatenate(arrays, axis=-1) for arrays in zip(*parts, strict=True))

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .analysis import aim_coverage, specular_paths
+from .analysis import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
 from .errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from .hudfigures import erode, hud_figures
 from .imageio import read_exr_channels, read_image, write_exr, write_png
@@ -173,8 +173,9 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     False (a method that does not render it) leaves the environment out of the prediction.
 
     A section is compared (``rendered_over_predicted``) only where the analysis' assumptions hold;
-    otherwise ``valid`` is false and ``not_comparable`` says why: today, a scattering surface lit
-    through specular surfaces (a condenser lens) whose light the analysis does not follow.
+    otherwise ``valid`` is false and ``not_comparable`` says why: a scattering surface lit through
+    specular surfaces (a condenser lens) whose light the analysis does not follow, or by a light
+    closer than its quadrature resolves (a backlight right behind a screen).
     """
     res = specular_paths(world, environment=environment)
     grid_h, grid_w = res["grid"]
@@ -184,10 +185,13 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     out: dict = {
         "method": "every specular branch followed from the pupil (chief rays for the path list; "
                   f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
-                  "directly by the emitters (deterministic quadrature); luminance = product of R and T along the "
+                  "directly by the emitters (deterministic quadrature) and by the environment ("
+                  f"{ENV_SAMPLES} directions from its own distribution per point); luminance = product of R and T "
+                  "along the "
                   "chain x luminance behind it" + ("" if environment else "; the environment left out, as the method "
                                                    "does not render it"),
-        "assumptions": "light reaches scattering surfaces directly from the emitters, not through specular optics",
+        "assumptions": "light reaches scattering surfaces directly from the emitters and the environment, not "
+                       "through specular optics, and from no light closer than the quadrature resolves",
         "grid_stride_px": res["stride"],
         "valid": True,
         "not_comparable": [],
@@ -238,6 +242,9 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
         ends += pup["ends"]
         p_total, p_per_path, p_through = _per_pixel(pup["paths"], len(sel))
+        coarse = np.zeros(len(sel))
+        for p in pup["paths"]:
+            np.add.at(coarse, p["pixel"], p["coarse"])
         entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
         entry["section_pixels"] = int(len(idx))
         pred = float(p_total.mean())
@@ -266,6 +273,12 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             reasons.append(f"{key}: scattering surfaces are lit through specular optics the analysis does not follow: "
                            f"{lit}; direct light would add {through:.4g} cd/m^2 to the {pred:.4g} predicted, so the "
                            "prediction is a lower bound")
+        coarse_y = float(coarse.mean())
+        if coarse_y > SPECULAR_SHARE * pred:
+            reasons.append(f"{key}: {coarse_y:.4g} of the {pred:.4g} cd/m^2 predicted comes from lights closer to the "
+                           "scattering surfaces than the analysis' quadrature resolves (cells larger than "
+                           f"{QUAD_TRUST:g} x their distance: a large light right behind a screen or diffuser), so "
+                           "the prediction is not reliable there")
         if entry["pupil_fill"] is not None and abs(entry["pupil_fill"] - 1) > FILL_NOTE:
             out["notes"].append(f"{key}: what the chief ray sees fills {100 * entry['pupil_fill']:.3g} % of the pupil "
                                 f"as seen through the optics: the chief ray alone would predict {chief:.4g} cd/m^2, "
