@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, edit_json, render
+from conftest import ROOT, edit_json, film_dof, render, t_bound
 
 from tracer import cli
 from tracer.imageio import read_exr_channels
@@ -741,3 +741,31 @@ def test_a_stop_before_the_first_batch_keeps_the_earlier_set(mirror, earlier):
     assert hashes(out) == before
     with pytest.raises(Exception, match="lies in the scene folder"):
         open_outputs(mirror / "sweep", mirror)
+
+
+def test_an_emitter_forward_tracing_leaves_without_particles_is_named(tmp_path):
+    """Two 20 mm panels side by side, 1e12 and 1e-6 cd/m^2 (the range the scene format allows): forward
+    tracing emits by flux, so the dim one gets 1e-18 of the particles and rendered 0 +- 0, silently (a
+    hand-built scene). The warning names it with its share; backward tracing reads it exactly, and no
+    preset is warned (their emitters share the flux evenly)."""
+    from presets import PRESETS
+    from presets._build import SceneBuilder, frame_matrix, rectangle
+    from tracer.world import World
+
+    sb = SceneBuilder(tmp_path / "s", "range", "1e12 next to 1e-6 cd/m^2")
+    for name, x, lum in (("bright", -10.0, 1e12), ("dim", 10.0, 1e-6)):
+        sb.add(name, rectangle(20.0, 20.0)[:2], {"type": "absorber"}, frame_matrix([x, 0, 0], [1, 0, 0], [0, 0, 1]),
+               emission={"luminance": lum, "aim": {"target": "eye", "share": 0.9}})
+    folder = sb.write(eye={"position": [0, 0, 500.0], "gaze": [0, 0, -1], "up": [0, 1, 0], "pupil_diameter_mm": 4.0,
+                           "accommodation_distance_mm": 500.0, "resolution": [4, 2], "fov_deg": [4.5, 2.2]})
+    res = INTEGRATORS["forward"](load_scene(folder), 1).render(Budget(rays=300_000))
+    said = [w for w in res.warnings if "emits particles in proportion to flux" in w]
+    assert len(said) == 1 and f"of its {res.paths:,} particles fewer than 100 came from dim (1e-18 of the flux, " \
+        "about 3.93e-13 particles)" in said[0], res.warnings
+    assert "bright" not in said[0]
+    y, var, back = render(folder, "backward", 300_000)
+    dim, err = y[:, 2:], np.sqrt(var[:, 2:])  # the dim panel's pixels, seen directly
+    assert np.all(np.abs(dim - 1e-6) < t_bound(dim.size, film_dof(back.film)) * err) and np.all(err < 1e-4 * 1e-6), y
+    for name, module in PRESETS.items():
+        world = World(load_scene(module.write(tmp_path / name)))
+        assert INTEGRATORS["forward"](world, 1).starved_emitters(131072) == [], name

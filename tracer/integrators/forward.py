@@ -25,6 +25,9 @@ from .path import PathMethod, PathState, continue_by_sampling, trace
 
 #: Replicates per batch: particles are dealt round-robin into this many groups (tracer.film).
 REPLICATES = 8
+#: An emitter that a render's particles, emitted in proportion to flux, leave with fewer than this
+#: many is named in a warning: beside a source 1e18 times as bright, a panel renders black, 0 +- 0.
+STARVED_PARTICLES = 100
 
 
 class Particles:
@@ -185,3 +188,24 @@ class ForwardTracer(Integrator, PathMethod):
     def finish(self, result):
         super().finish(result)
         result.extra["emitted_flux_lm"] = self.lights.total_flux_lm
+        starved = self.starved_emitters(result.paths)
+        if starved:
+            names = ", ".join(f"{name} ({share:.2g} of the flux, about {expected:.3g} particles)"
+                              for name, share, expected in starved[:5])
+            more = f" and {len(starved) - 5} more" if len(starved) > 5 else ""
+            result.warnings.append(
+                f"forward tracing emits particles in proportion to flux: of its {result.paths:,} particles fewer "
+                f"than {STARVED_PARTICLES} came from {names}{more}, so what they light is missing or noisy in the "
+                "image, with no error bar to show it; render the scene with the backward method, which finds every "
+                "emitter by its own hits")
+
+    def starved_emitters(self, particles: int) -> list[tuple[str, float, float]]:
+        """(name, share of the flux, particles expected) of every emitting object that ``particles``
+        particles, emitted in proportion to flux, leave with fewer than :data:`STARVED_PARTICLES`."""
+        lights = self.lights
+        if lights.total_flux_lm <= 0:
+            return []
+        power = np.bincount(lights.slot, weights=lights.power, minlength=len(self.world.scene.objects))
+        share = power / power.sum()
+        return [(self.world.scene.objects[s].name, float(share[s]), float(particles * share[s]))
+                for s in np.flatnonzero(power > 0).tolist() if particles * share[s] < STARVED_PARTICLES]
