@@ -115,6 +115,34 @@ def test_channels_and_methods_that_the_scene_does_not_need_are_skipped_with_the_
     assert "photons leave the scene's emitters only" in why["photon"]
 
 
+def test_a_method_given_to_a_channel_renders_it_or_the_skip_is_warned_of(preset):
+    """hud_method "photon" on hud-direct against a sky: photon maps are not needed there (next-event
+    estimation reaches the scatterer), and the HUD channel was skipped, the HUD left out of the image
+    with no warning (a hand-built input). The photon method renders it right, so it renders it, and the
+    channel's entry notes that backward would do the same faster; its symbols agree with backward
+    tracing's HUD channel. A method that cannot render a channel (backward for a black environment)
+    skips it with a warning."""
+    folder = preset("hud-direct", resolution=LOW)
+    _sky(folder)
+    means = {}
+    for hud_method in ("photon", "backward"):
+        edit_json(folder, lambda d, m=hud_method: d.update(methods={"hybrid": {"hud_method": m}}))
+        res = INTEGRATORS["hybrid"](load_scene(folder), 1).render(Budget(rays=3_000_000))
+        hud = res.extra["channels"]["hud"]
+        assert hud["method"] == hud_method and hud["skipped"] is None, hud
+        assert ("backward would do the same faster" in (hud["note"] or "")) == (hud_method == "photon"), hud["note"]
+        means[hud_method] = (hud["mean_cd_m2"], hud["mean_standard_error_cd_m2"], res.film)
+        assert not any("skipped" in w for w in res.warnings), res.warnings
+    (m1, s1, f1), (m2, s2, f2) = means["photon"], means["backward"]
+    dof = welch_dof((s1 * s1, f1.groups["hud"].count - 1), (s2 * s2, f2.groups["hud"].count - 1))
+    assert abs(m1 - m2) < t_bound(1, dof) * math.hypot(s1, s2) and m1 > 0, (m1, s1, m2, s2)
+    edit_json(folder, lambda d: d.update(environment={"type": "none"},
+                                         methods={"hybrid": {"environment_method": "backward"}}))
+    res = INTEGRATORS["hybrid"](load_scene(folder), 1).render(Budget(rays=1_000_000))
+    assert res.extra["channels"]["environment"]["skipped"] == "the environment is off or black"
+    assert "environment channel skipped: the environment is off or black" in res.warnings, res.warnings
+
+
 def test_a_channel_whose_pilots_find_no_light_is_skipped_with_a_warning_that_says_so(preset):
     """analytic-mirror with the eye turned away from its panel and mirror: the HUD channel's pilots
     (backward, forward) find no light, the channel is skipped and the rest of the budget not spent; the

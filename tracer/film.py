@@ -136,6 +136,11 @@ class Film:
         return sum(g.count for g in self.groups.values())
 
     @property
+    def fewest_replicates(self) -> int:
+        """The replicates of the group that has fewest (an error needs two in every group)."""
+        return min((g.count for g in self.groups.values()), default=0)
+
+    @property
     def rep_sum(self) -> np.ndarray:
         """Per pixel, the sums over replicates of Y(m_r), over every group."""
         return sum((g.sum for g in self.groups.values()), start=np.zeros(self.pixels)) if len(self.groups) > 1 \

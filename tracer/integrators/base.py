@@ -42,6 +42,9 @@ PILOT_STREAM = 2**31 - 1
 PROBE_STREAM = 1
 #: Paths in a pilot.
 PILOT_PATHS = 1 << 14
+#: A render merges batches until every replicate group of its film holds this many replicates,
+#: whatever its budget: the error bars come from their spread (:func:`drive`).
+MIN_REPLICATES = 2
 #: With a budget in seconds and no batch size given, a batch is sized from the pilot's pace to take
 #: at most this share of the budget, so that the render ends within a few percent of it (a batch is
 #: never cut short: it is the unit that is seed-addressed and merged).
@@ -188,6 +191,15 @@ class Integrator:
         self.truncated = 0
         self._reference = None
         self.pilot_rays = 0
+        #: Hears, where given (``notice(message)``), what the method finds before its first batch and
+        #: also puts in ``warnings``: the command line prints it at once, Blender reports it.
+        self.notice = None
+
+    def warn_early(self, message: str):
+        """A warning known before the first batch: into ``warnings`` (the report) and to ``notice``."""
+        self.warnings.append(message)
+        if self.notice is not None:
+            self.notice(message)
 
     # -- options ---------------------------------------------------------------------------------
     @classmethod
@@ -312,6 +324,11 @@ class Integrator:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
+        film = result.film
+        if result.batches and film.groups and film.fewest_replicates < MIN_REPLICATES:  # a render stopped early
+            result.warnings.append(
+                f"the error bars are not measured: the film holds {film.fewest_replicates} replicate(s) where their "
+                f"spread needs {MIN_REPLICATES}, so every standard error and Y_var reads 0; render longer")
         self._report_cut(result)
 
     def _report_cut(self, result: RenderResult):
@@ -333,12 +350,13 @@ class Integrator:
             "missing_is_lower_bound": still > 0, "image_mean_standard_error_cd_m2": se}
         if missing > 2 * se:
             share = f" ({missing / mean:.2%} of it)" if mean > 0 else ""
+            against = f", {missing / se:.1f} times its standard error" if se > 0 else ""
             trapped = (f"; {still:,} of them were still going after those segments (trapped, as between the faces "
                        "of glass or the walls of a closed room), so the bias may be larger" if still else "")
             result.warnings.append(
                 f"{cut:,} {self.probed_paths} were cut at methods.{self.name}.max_depth = {self.max_depth}; followed "
                 f"{PROBE_DEPTH} segments further they add {'at least ' if still else ''}{missing:.3g} cd/m^2 to the "
-                f"image mean{share}, {missing / se if se > 0 else math.inf:.1f} times its standard error: the image "
+                f"image mean{share}{against}: the image "
                 f"is biased low; raise max_depth{trapped}")
 
     found_what = "found light"
@@ -376,8 +394,11 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     No batch is issued that cannot land within the budget: with a budget in seconds, none once the
     time left is shorter than a batch takes; with a budget in rays, none beyond the rays that the
     merged and running batches will already bring (estimated from the finished ones). When the
-    budget is met, batches still running are dropped, not awaited; but at least one batch is merged,
-    however short the budget, so that an image is never empty for lack of time. A time budget counts
+    budget is met, batches still running are dropped, not awaited; but however short the budget, batches
+    are merged until every replicate group of the film holds :data:`MIN_REPLICATES` replicates (one
+    batch for most methods; two where a batch is one replicate, as a backward batch of fewer paths than
+    twice the pixels is), so that an image is never empty for lack of time and its error bars are
+    measured (they come from the replicates' spread: a single replicate gave 0 +- 0). A time budget counts
     from ``started`` (``time.perf_counter()`` when the render began: the pilot and the workers'
     start-up are part of the wall time the user gave), by default from now. ``preview(film)`` is
     called with the merged film after a merge, at most every :data:`PREVIEW_SECONDS` (not after the
@@ -399,8 +420,12 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
 
     workers = getattr(executor, "workers", 1)
 
+    def short() -> bool:
+        """The film cannot measure its error yet: some group holds fewer than MIN_REPLICATES replicates."""
+        return merged == 0 or (bool(film.groups) and film.fewest_replicates < MIN_REPLICATES)
+
     def met() -> bool:
-        return merged > 0 and budget.fraction(rays, time.perf_counter() - start) >= 1.0
+        return not short() and budget.fraction(rays, time.perf_counter() - start) >= 1.0
 
     def worth_issuing() -> bool:
         if not batch_seconds:
@@ -425,7 +450,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
             pending[next_index] = executor.submit(next_index)
             next_index += 1
         if not pending:
-            if budget.seconds is not None and budget.rays is None and merged > 0:
+            if budget.seconds is not None and budget.rays is None and not short():
                 break  # no batch can finish within the time left
             pending[next_index] = executor.submit(next_index)
             next_index += 1

@@ -144,6 +144,8 @@ class Channel:
     environment: bool
     candidates: dict[str, str | None] = field(default_factory=dict)
     skipped: str | None = None
+    #: What the report should know of the method given to the channel (it renders, but need not).
+    note: str | None = None
     chosen: str | None = None
     chosen_by: str = ""
     integrator: Integrator | None = None
@@ -172,10 +174,15 @@ def applicable(world, lights: bool, environment: bool) -> dict[str, str | None]:
         return out
     out["forward"] = None
     blockers = specular_paths(world, environment=False)["specular_blockers"] if world.accel is not None else {}
-    out["photon"] = None if blockers else (
-        "every scattering surface the eye sees is lit straight from the emitters (or there is none): next-event "
-        "estimation reaches them, photon maps are not needed")
+    out["photon"] = None if blockers else PHOTON_NOT_NEEDED
     return out
+
+
+#: Why the pilots leave the photon method out where next-event estimation reaches every scattering
+#: surface in view. It would still render such a channel right (its connections take the direct light,
+#: its photons the rest), so a channel given the photon method is rendered with it all the same.
+PHOTON_NOT_NEEDED = ("every scattering surface the eye sees is lit straight from the emitters (or there is none): "
+                     "next-event estimation reaches them, photon maps are not needed")
 
 
 #: The strata a pilot is judged on: the brightest of these shares of the lit pixels (of the pilots'
@@ -331,8 +338,11 @@ class _Channels(Integrator):
             if c.skipped is not None:
                 continue
             c.candidates = applicable(c.world, c.lights, c.environment)
-            if c.asked != "auto" and c.candidates.get(c.asked, "it is not a method for this channel") is not None:
-                c.skipped = f"{c.asked} was asked for, but {c.candidates.get(c.asked, 'it is not a method here')}"
+            why = c.candidates.get(c.asked, "it is not a method for this channel")
+            if c.asked == "photon" and why == PHOTON_NOT_NEEDED:
+                c.note = f"photon was asked for and renders it, though {why} (backward would do the same faster)"
+            elif c.asked != "auto" and why is not None:
+                c.skipped = f"{c.asked} was asked for, but {why}"
         live = [c for c in self.channels if c.skipped is None]
         # What to pilot: every method that applies to an "auto" channel, where there is more than one;
         # with several channels, also the method of each channel (the allocation needs their variances).
@@ -482,7 +492,7 @@ class _Channels(Integrator):
         channels = {}
         for c in self.channels:
             entry = {"method": c.chosen if c.skipped is None else None, "asked": c.asked,
-                     "chosen_by": c.chosen_by or None, "skipped": c.skipped,
+                     "chosen_by": c.chosen_by or None, "skipped": c.skipped, "note": c.note,
                      "sources": [s for s, on in (("emitters", c.lights), ("environment", c.environment)) if on],
                      "pilots": [p.summary() for p in c.pilots]}
             if c.integrator is not None:
@@ -494,7 +504,8 @@ class _Channels(Integrator):
                                     "mean_standard_error_cd_m2": film.mean_standard_error(c.group),
                                     "warnings": list(c.integrator.warnings)}
                 result.warnings += [f"{c.name} channel: {w}" for w in c.integrator.warnings]
-            elif c.skipped is not None and any(p.paths for p in c.pilots):  # its pilots ran and found nothing
+            elif c.skipped is not None and (c.asked != "auto" or any(p.paths for p in c.pilots)):
+                # the method asked for cannot render it, or its pilots ran and found nothing
                 result.warnings.append(f"{c.name} channel skipped: {c.skipped}")
             channels[c.name] = entry
         extra["channels"] = channels
