@@ -144,6 +144,7 @@ def render_final(engine, depsgraph) -> dict:
         integrator = INTEGRATORS[s.method](world, s.seed)
         for w in aim_preflight(world, s.method, integrator.renders_environment):
             engine.report({"WARNING"}, f"HUD Tracer: before the first ray: {w}")
+        integrator.notice = lambda w: engine.report({"WARNING"}, f"HUD Tracer: {w}")
         for name, (channels, chan_id, _) in passes_of(s.method).items():
             engine.add_pass(name, channels, chan_id)
         rr = engine.begin_result(0, 0, width, height)

@@ -200,7 +200,9 @@ def test_arguments_out_of_range_are_refused_before_any_ray(framed):
     for kw, arg in ((dict(step_mm=0), "step_mm"), (dict(step_mm=math.nan), "step_mm"),
                     (dict(half_mm=(-1, 5)), "half_mm"), (dict(half_mm=(1000, 1000), step_mm=1), "step_mm"),
                     (dict(field_deg=(0, 2)), "field_deg"), (dict(threshold=1.5), "threshold"),
-                    (dict(threshold=0), "threshold")):
+                    (dict(threshold=0), "threshold"),
+                    # the design eye alone, "eyebox 0.0 x 0.0 mm" with exit 0 (a mm-cm slip; hand-built input)
+                    (dict(step_mm=100), "step_mm"), (dict(half_mm=(0, 0)), "half_mm")):
         with pytest.raises(ScanArgumentError) as e:
             eyebox_scan(world, **kw)
         assert e.value.argument == arg
@@ -226,6 +228,7 @@ def test_command_line_writes_the_set_and_refuses_bad_input(framed, tmp_path):
         "negative half": ((folder, "--half", -5, 10), "--half: two half-widths"),
         "too many offsets": ((folder, "--half", 500, 500, "--step", 0.5), "--step: 0.5 mm"),
         "threshold": ((folder, "--threshold", 1.5), "--threshold: must lie in (0, 1]"),
+        "step longer than the scan": ((folder, "--step", 100), "--step: 100 mm is longer than both half-widths"),
         "field": ((folder, "--field", 0, 2), "--field: two angles"),
         "unknown scene": (("no-such-preset",), "no-such-preset: neither a scene folder nor a preset"),
         "no LCD in view": (("analytic-mirror",), "--field: the display field cannot be found"),

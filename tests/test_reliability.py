@@ -652,6 +652,15 @@ TINY_OR_MISTYPED = {
     "accommodation 0.001 mm": (_set(("eye", "accommodation_distance_mm"), 0.001), "eye.accommodation_distance_mm"),
     # a black image of exit 0 and a RuntimeWarning from the roulette
     "environment 1e-300": (_set(("environment",), {"type": "uniform", "luminance": 1e-300}), "environment.luminance"),
+    # tracebacks from the colour's normalisation (found by hand-built inputs of 2026-12-05)
+    "environment colour of luminance 0": (_set(("environment",), {"type": "uniform", "luminance": 100.0,
+                                                                  "color": [0.0, 0.0, 5e-324]}), "environment.color"),
+    "sun colour of luminance 0": (_set(("environment",), {"type": "none", "sun": {"direction": [0, 1, 1],
+                                                                                  "color": [5e-324, 0.0, 0.0]}}),
+                                  "environment.sun.color"),
+    # an analyser that passes nothing rendered black with "try the other method, or more rays"
+    "analyser passing nothing": (_set(("eye", "analyser"), {"transmittance_along": 0.0, "transmittance_across": 0.0}),
+                                 "eye.analyser"),
 }
 
 
@@ -769,3 +778,32 @@ def test_an_emitter_forward_tracing_leaves_without_particles_is_named(tmp_path):
     for name, module in PRESETS.items():
         world = World(load_scene(module.write(tmp_path / name)))
         assert INTEGRATORS["forward"](world, 1).starved_emitters(131072) == [], name
+
+
+def test_a_render_of_one_replicate_takes_a_second_batch_and_a_stopped_one_says_its_errors_are_unmeasured(mirror):
+    """A backward batch holds one replicate per pass over the pixels: on an image of more pixels than half
+    a batch, a budget that one batch met gave one replicate, and every standard error and Y_var read 0,
+    an exact-looking answer (the hybrid method did so on hud-direct-env below 5 M rays; found by a
+    hand-built input). The driver now merges batches until every replicate group holds two, whatever
+    the budget; a render stopped before that warns that its error bars are not measured."""
+    edit_json(mirror, lambda d: d["eye"].update(resolution=[400, 200]))
+    scene = load_scene(mirror)
+    res = INTEGRATORS["backward"](scene, 1).render(Budget(rays=1000))
+    assert res.batches == 2 and res.film.fewest_replicates == 2 and res.film.mean_standard_error() > 0, res.batches
+    assert not any("error bars are not measured" in w for w in res.warnings), res.warnings
+    answers = iter([False] + [True] * 100)  # go on before the first batch, stop after it
+    stopped = INTEGRATORS["backward"](scene, 1).render(Budget(rays=10**9), should_stop=lambda: next(answers))
+    assert stopped.partial and stopped.batches == 1 and stopped.film.mean_standard_error() == 0
+    assert any(w.startswith("the error bars are not measured: the film holds 1 replicate(s)") for w in stopped.warnings)
+
+
+def test_a_scene_file_with_a_byte_order_mark_loads(mirror):
+    """Windows editors save UTF-8 with a byte-order mark, which the loader refused with Python's own
+    words ("Unexpected UTF-8 BOM (decode using utf-8-sig)"; a hand-built input): it reads the scene."""
+    path = mirror / "scene.json"
+    plain = load_scene(mirror)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    marked = load_scene(mirror)
+    assert [o.name for o in marked.objects] == [o.name for o in plain.objects]
+    assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(marked.objects, plain.objects, strict=True))
+    assert np.array_equal(marked.eye.position, plain.eye.position)

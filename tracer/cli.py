@@ -198,8 +198,7 @@ def cmd_render(args) -> int:
             report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
                                           should_stop=flag, batch_size=args.batch_size, workers=args.workers,
                                           analyse=not args.no_analysis,
-                                          notice=lambda w: print(f"warning: before the first ray: {w}",
-                                                                 file=sys.stderr, flush=True))
+                                          notice=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
     except StoppedBeforeFirstBatch as e:
         if bar:
             bar.close()

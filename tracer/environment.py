@@ -42,7 +42,7 @@ import numpy as np
 from .errors import ImageReadError, SceneError
 from .imageio import read_image
 from .sampling import Distribution1D, frame_from_normal, to_world, uniform_sphere
-from .units import luminance, normalize_color
+from .units import Y_WEIGHTS, luminance, normalize_color
 from .validate import MAX_ABS, MAX_LUMINANCE, MIN_LUMINANCE, FieldChecker
 from .vec import dot, norm
 
@@ -623,6 +623,14 @@ _REQUIRED = {"none": set(), "uniform": {"luminance"}, "hdri": {"file", "calibrat
 _SUN_FIELDS = {"illuminance_lux", "angular_diameter_deg", "color"}
 
 
+def _check_luminous(ck, rgb: np.ndarray, fld: str):
+    """Refuse a colour whose luminance is not positive (black, or so dark that it is 0 in floating
+    point): it is normalised to unit luminance (tracer.units.normalize_color)."""
+    if not float(rgb @ Y_WEIGHTS) > 0.0:
+        ck.fail(fld, "must have a positive luminance (0.2126 R + 0.7152 G + 0.0722 B): it is black, or so dark that "
+                     "its luminance is 0 in floating point")
+
+
 def _sun_from_spec(ck: FieldChecker, spec) -> Sun:
     """The :class:`Sun` of an environment's "sun" block, validated field by field."""
     ck.obj(spec, "environment.sun")
@@ -634,8 +642,7 @@ def _sun_from_spec(ck: FieldChecker, spec) -> Sun:
                          "environment.sun.angular_diameter_deg", min_value=0.0, min_exclusive=True,
                          max_value=SUN_MAX_ANGULAR_DIAMETER_DEG)
     rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.sun.color", max_value=None)
-    if rgb.max() == 0.0:
-        ck.fail("environment.sun.color", "must not be black")
+    _check_luminous(ck, rgb, "environment.sun.color")
     sun = Sun(direction, e, diameter, rgb)
     if not sun.luminance_cd_m2 <= MAX_LUMINANCE:
         ck.fail("environment.sun", f"illuminance_lux {e:g} over a disk of {diameter:g} deg gives it a luminance of "
@@ -720,8 +727,7 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
         if 0 < L < MIN_LUMINANCE:
             ck.fail("environment.luminance", f"{L:.3g} cd/m^2 is below {MIN_LUMINANCE:g} (give 0 for no light)")
         rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.color", max_value=None)
-        if rgb.max() == 0.0:
-            ck.fail("environment.color", "must not be black")
+        _check_luminous(ck, rgb, "environment.color")
         return UniformEnvironment(L, rgb)
 
     image_file = ck.string(spec["file"], "environment.file")
@@ -745,7 +751,7 @@ def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, fi
     except ValueError as exc:
         raise SceneError(file, "environment.file", f"{image_file!r}: {exc}") from exc
     if not env.max_luminance <= MAX_LUMINANCE:
-        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "
+        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance!r} "
                                                  f"cd/m^2, above {MAX_LUMINANCE:g}")
     if 0 < env.max_luminance < MIN_LUMINANCE:
         ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "

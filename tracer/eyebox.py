@@ -332,6 +332,11 @@ def check_scan(half_mm, step_mm, field_deg, threshold):
     if not (math.isfinite(step_mm) and 0 < step_mm <= 1000):
         raise ScanArgumentError("step_mm", f"must be a finite step in (0, 1000] mm, got {step_mm}")
     n = math.prod(2 * math.floor(h / step_mm + 1e-9) + 1 for h in half)
+    if n == 1:  # the design eye alone: an eyebox of 0 x 0 mm, whatever the optics
+        if not np.any(half > 0):
+            raise ScanArgumentError("half_mm", "both half-widths are 0: the scan would hold the design eye alone")
+        raise ScanArgumentError("step_mm", f"{step_mm:g} mm is longer than both half-widths (+-{half[0]:g} x "
+                                           f"+-{half[1]:g} mm): the scan would hold the design eye alone")
     if n > MAX_OFFSETS:
         raise ScanArgumentError("step_mm", f"{step_mm:g} mm over +-{half[0]:g} x +-{half[1]:g} mm makes {n} eye "
                                            f"offsets, more than {MAX_OFFSETS}")

@@ -499,6 +499,7 @@ def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
     world = integrator.world.with_eye(eye)
     rebuilt = type(integrator)(world, integrator.seed, None if integrator.auto_batch else integrator.batch_size,
                                integrator.opts)
+    rebuilt.notice = integrator.notice
     left = Budget(rays=None if budget.rays is None else max(1, budget.rays - first.rays),
                   seconds=None if budget.seconds is None else max(1e-3, budget.seconds - (time.perf_counter() - t0)))
     found = {"pilot_rays": first.rays, "pilot_seconds": first.seconds, "adaptation_mode": spec.adaptation,
@@ -601,7 +602,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
                  workers: int = 1, notice=None):
     """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
     (report dict, RenderResult). ``notice(message)``, where given, hears the warnings that can be
-    given before the first ray (:func:`aim_preflight`); the report repeats them from its own analysis.
+    given before the first ray (:func:`aim_preflight`; the report repeats them from its own analysis)
+    and those the method finds before its first batch (``Integrator.warn_early``).
 
     The output folder is checked and locked before the first ray (:class:`tracer.outputs.OutputSet`:
     :class:`~tracer.outputs.OutputFolderError` if it cannot take the outputs), and image.exr,
@@ -619,7 +621,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         integrator = INTEGRATORS[method](world, seed, batch_size)
         if notice is not None:
             for w in aim_preflight(world, method, integrator.renders_environment):
-                notice(w)
+                notice(f"before the first ray: {w}")
+            integrator.notice = notice
         integrator, result = run_render(integrator, budget, workers, progress, should_stop)
         products = render_products(integrator.world, integrator, result, budget, analyse)
         outputs.commit(products.files())

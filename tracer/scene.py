@@ -572,10 +572,13 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                                   f"machine has {memory / 2**30:.1f} GiB (the limit is half of it)")
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
     if np.any(fov <= 0) or np.any(fov >= 170):
-        ck.fail("eye.fov_deg", f"each field angle must lie in (0, 170) degrees, got {fov[0]:.4g} x {fov[1]:.4g}")
+        ck.fail("eye.fov_deg", f"each field angle must lie in (0, 170) degrees, got {fov[0]!r} x {fov[1]!r}")
     analyser = None
     if spec.get("analyser") is not None:
         analyser = parse_block(ck, spec["analyser"], "eye.analyser", ANALYSER.fields)
+        if analyser["transmittance_along"] == 0 and analyser["transmittance_across"] == 0:
+            ck.fail("eye.analyser", "transmittance_along and transmittance_across are both 0: the analyser passes no "
+                                    "light and every image would be black")
     return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])), adaptation,
                    from_image, age, analyser)
 
@@ -622,7 +625,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     except OSError as e:
         raise SceneError(fname, "", f"cannot be read ({e.strerror or e})") from None
     try:
-        text = raw_bytes.decode("utf-8")
+        text = raw_bytes.decode("utf-8-sig")  # a byte-order mark, which Windows editors write, is dropped
     except UnicodeDecodeError as e:
         raise SceneError(fname, "", f"malformed JSON: {e}") from None
     raw = parse_json(text, fname)

@@ -226,7 +226,8 @@ class FieldChecker:
         for i in range(3):
             if c[i] < 0 or (max_value is not None and c[i] > max_value):
                 where = fld if not isinstance(value, list) else f"{fld}[{i}]"
-                self.fail(where, f"must lie in [0, {max_value}], got {c[i]:g}")
+                bounds = f"lie in [0, {max_value:g}]" if max_value is not None else "be at least 0"
+                self.fail(where, f"must {bounds}, got {c[i]:g}")
         return c
 
     def string(self, value, fld: str) -> str:

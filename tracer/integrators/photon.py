@@ -76,6 +76,8 @@ FOOTPRINT_RADII = 1.5
 TARGET_PHOTONS = 10.0
 #: ... but at most this many footprints (beyond it the image would blur more than it gains).
 MAX_FOOTPRINT_RADII = 12.0
+#: A radius_mm given above this many times MAX_FOOTPRINT_RADII footprints is warned of before the pilot.
+GIVEN_RADIUS_WARN = 2.0
 #: Photons count at a visibility point only on the same object with normals at most ~45 deg apart.
 MIN_NORMAL_COS = 0.7
 #: Candidate (point, photon) pairs examined at once (bounds the gather's memory: ~100 bytes each).
@@ -356,6 +358,20 @@ class PhotonTracer(BackwardTracer):
         self.radius_from = f"{TARGET_PHOTONS:g} photons per lit visibility point and replicate of a default batch"
         return float(r)
 
+    def _check_given_radius(self, rng: np.random.Generator):
+        """Warn, before the pilot, of a ``radius_mm`` far larger than the automatic one can be: each
+        visibility point gathers every photon of a disk that size, so that the number of pairs, the time
+        of a batch (and of a stop, which waits for it) and the blur grow with its square (10 mm on
+        hud-screen, 107 pixel footprints: 4,487 photons per point and 500 s for 200,000 rays; a
+        hand-built input)."""
+        footprint = self.footprint(rng)
+        if footprint > 0 and self.r0 > GIVEN_RADIUS_WARN * MAX_FOOTPRINT_RADII * footprint:
+            self.warn_early(
+                f"methods.photon.radius_mm = {self.r0:g} is {self.r0 / footprint:.3g} pixel footprints on the surface "
+                f"in view (the automatic radius is {FOOTPRINT_RADII:g} to {MAX_FOOTPRINT_RADII:g}): every visibility "
+                "point gathers the photons of a disk that size, so each batch is slow (a stop waits for the one "
+                "running) and the image is blurred over it; 0 chooses the radius")
+
     def fit_batch(self, budget):
         """Batches keep their photon count (the gather radius was chosen for it); only the pilot runs."""
         self.reference_luminance  # noqa: B018
@@ -488,6 +504,8 @@ class PhotonTracer(BackwardTracer):
         photons gathered (infinite, so that no photon is thinned, where none was gathered)."""
         if self.r0 is None:
             self.r0 = self.initial_radius(ctx.rng)
+        else:
+            self._check_given_radius(ctx.rng)
         n = self.batch_size
         k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
         pix = ctx.rng.integers(0, self.npix, k)
