@@ -37,6 +37,10 @@ What applies (model no more than the scene needs; the report says what was skipp
 - the whole scene (``--method auto``, one channel): backward always; forward and photon only with a
   black environment (they do not render it).
 
+A channel given a method (``hud_method``, ``environment_method``) is rendered with it wherever the
+method can render it, the photon method included where photon maps are not needed (the channel's
+``note`` says so); one that cannot skips the channel with a warning.
+
 Every object stays traced in every channel: an object that no path of a channel reaches costs only
 its share of Embree's acceleration structure, and telling exactly which are unreachable would need
 the visibility this method is there to compute.
