@@ -245,3 +245,24 @@ def test_command_line_writes_the_set_and_refuses_bad_input(framed, tmp_path):
                     "--quiet")
     assert res.returncode == 3 and "not valid" in res.stderr and "projection_lens" in res.stderr
     assert json.loads((tmp_path / "scr" / "eyebox.json").read_text())["valid"] is False
+
+
+def test_a_backlight_closer_than_the_quadrature_resolves_is_not_scanned(tmp_path):
+    """A screen (Lambertian transmitter) 1 mm over a 200 mm panel, seen from 500 mm: the analysis'
+    quadrature (cells of 71 mm) predicts it 4.7 times too bright there (tests/test_analysis.py), so
+    the scan says it cannot predict the scene, with the reason; 600 mm over the panel it can."""
+    valid = {}
+    for gap in (1.0, 600.0):
+        sb = SceneBuilder(tmp_path / f"g{gap:g}", "backlight", "a screen over a panel")
+        sb.add("screen", rectangle(600.0, 600.0)[:2], {"type": "lambertian_transmitter", "transmittance": 0.5})
+        sb.add("panel", rectangle(200.0, 200.0)[:2], {"type": "absorber"},
+               frame_matrix([0, 0, -gap], [1, 0, 0], [0, 0, 1]), emission={"luminance": 1000.0})
+        folder = sb.write(eye={"position": [0.0, 0.0, 500.0], "gaze": [0, 0, -1], "up": [0, 1, 0],
+                               "pupil_diameter_mm": 4.0, "accommodation_distance_mm": 500.0,
+                               "resolution": [16, 16], "fov_deg": [2.0, 2.0]})
+        r = eyebox_scan(World(load_scene(folder)), half_mm=(4, 4), step_mm=2, field_deg=(1, 1))
+        valid[gap] = r.valid
+        if not r.valid:
+            assert any("closer to the scattering surfaces than the analysis' quadrature resolves" in x
+                       for x in r.reasons), r.reasons
+    assert valid == {1.0: False, 600.0: True}

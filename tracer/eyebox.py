@@ -202,6 +202,8 @@ class EyeboxResult:
     design_cd_m2 (5,): the field points at the design eye (offset 0, 0), cd/m^2.
     inside (ny, nx): every field point at or above ``threshold`` x its design value.
     region (ny, nx): the eyebox: the 4-connected part of ``inside`` that holds the design eye.
+    coarse_cd_m2 (ny, nx, 5): the part of ``luminance_cd_m2`` from lights closer to the scattering
+    surfaces than the analysis' quadrature resolves (a backlight right behind a screen), cd/m^2.
     valid, reasons: whether the analysis can predict this scene, and why not.
     figures: :meth:`figures` (None when not valid).
     """
@@ -218,6 +220,7 @@ class EyeboxResult:
     valid: bool
     reasons: list[str]
     specular_blockers: dict[str, list[str]]
+    coarse_cd_m2: np.ndarray | None = None
 
     @property
     def field_points(self) -> np.ndarray:
@@ -377,6 +380,7 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     n = len(FIELD_POINTS)
     lum = np.zeros((len(zs), len(xs), n))
     through = np.zeros_like(lum)
+    coarse = np.zeros_like(lum)
     blockers: dict[str, set] = {}
     for j, z in enumerate(zs):
         for i, x in enumerate(xs):
@@ -385,13 +389,15 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
             d = points - moved.position if points is not None else directions
             res = specular_paths(world.with_eye(moved), directions=d, environment=False)
             lum[j, i], _, through[j, i] = _per_pixel(res["paths"], n)
+            for path in res["paths"]:
+                np.add.at(coarse[j, i], path["pixel"], path["coarse"])
             for k, v in res["specular_blockers"].items():
                 blockers.setdefault(k, set()).update(v)
         if progress is not None:
             progress((j + 1) / len(zs), f"eyebox: {(j + 1) * len(xs)} of {len(zs) * len(xs)} eye offsets")
     design = lum[int(np.argmin(np.abs(zs))), int(np.argmin(np.abs(xs)))].copy()
     result = EyeboxResult(scene.name, xs, zs, float(step_mm), fld, float(threshold), lum, through, design, True, [],
-                          {k: sorted(v) for k, v in sorted(blockers.items())})
+                          {k: sorted(v) for k, v in sorted(blockers.items())}, coarse)
     result.reasons = _reasons(result)
     result.valid = not result.reasons
     return result
@@ -409,6 +415,12 @@ def _reasons(r: EyeboxResult) -> list[str]:
                        f"{int(unfollowed.any(axis=2).sum())} of {unfollowed.shape[0] * unfollowed.shape[1]} eye "
                        f"offsets; at the design eye direct light would add {through[j, i].max():.4g} cd/m^2 to the "
                        f"{lum[j, i][np.argmax(through[j, i])]:.4g} predicted")
+    if r.coarse_cd_m2 is not None:
+        rough = r.coarse_cd_m2 > SPECULAR_SHARE * lum
+        if rough.any():
+            reasons.append(f"lights lie closer to the scattering surfaces than the analysis' quadrature resolves (a "
+                           f"backlight right behind a screen), at {int(rough.any(axis=2).sum())} of "
+                           f"{rough.shape[0] * rough.shape[1]} eye offsets: the predicted luminances are not reliable")
     dark = [name for (name, _, _), v in zip(FIELD_POINTS, r.design_cd_m2, strict=True) if v <= 0]
     if dark and not reasons:  # (dark because of the optics not followed, the reason above says)
         reasons.append(f"the analysis predicts no light at the design eye for the field point(s) {', '.join(dark)}: "

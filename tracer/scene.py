@@ -274,7 +274,7 @@ def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
 
 def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
     """A 4 x 4 world matrix (mm) from ``matrix`` or translate/rotate_deg/scale; rejects degenerate ones.
-    An absent transform is the identity; a null one is refused, as every other null block is."""
+    An absent transform is the identity; a null one is refused (a null method block or analyser means "absent")."""
     ck.obj(spec, fld)
     if "matrix" in spec:
         ck.keys(spec, fld, {"matrix"}, set())
