@@ -339,6 +339,18 @@ def test_every_refusal_is_one_line_before_any_run_and_writes_nothing(tmp_path, n
     assert no_render == [], case
 
 
+def test_an_object_whose_name_reads_as_a_glob_is_pointed_to_its_index(tmp_path, no_render):
+    """Object names in --set are globs, so "mirror[1]" (a name Blender makes easily) matched nothing and
+    the refusal listed "mirror[1]" among the objects without saying why (a hand-built input): it now
+    says to address the object by its index."""
+    folder = analytic_mirror.write(tmp_path / "s")
+    edit_json(folder, lambda d: d["objects"][2].update(name="panel[1]"))
+    code, err = sweep(tmp_path / "o", str(folder), "--set", "objects[panel[1]].emission.luminance=1:2:2")
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "names are globs (*, ? and [...] match), so address it by its index, objects[2]" in err, err
+    assert no_render == []
+
+
 def test_a_refused_scene_or_output_folder_writes_nothing(tmp_path, no_render):
     (tmp_path / "file").write_text("x")
     for args, out, message in ((("no-such-preset", "--set", f"{PANEL}=1:2:2"), tmp_path / "a", "no-such-preset: "
