@@ -197,9 +197,7 @@ class ChiefRays(PathMethod):
                 contrib = f * take(ql, kk) * g
                 lost = np.flatnonzero(blocked & (luminance3(contrib) > 0))
                 if len(lost):
-                    face = accel.intersect(take(o, lost), take(d, lost)).face
-                    spec = face >= 0
-                    spec[spec] = self._delta_face[face[spec]]
+                    spec, face = self._specular_first(take(o, lost), take(d, lost))
                     if spec.any():
                         lost, face = lost[spec], face[spec]
                         np.add.at(through, ii[lost], luminance3(take(contrib, lost)))
@@ -216,6 +214,14 @@ class ChiefRays(PathMethod):
         factor = luminance3(state.beta)
         self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, factor * through, factor * coarse)
         return None
+
+    def _specular_first(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For blocked shadow rays (origins, directions (3, k)): whether the first surface they meet is
+        specular (k,), and its face (k,)."""
+        face = self.world.accel.intersect(o, d).face
+        spec = face >= 0
+        spec[spec] = self._delta_face[face[spec]]
+        return spec, face
 
     def _name_blockers(self, slots: np.ndarray, faces: np.ndarray):
         """Record the specular objects of ``faces`` as blocking the light of the scattering objects
@@ -250,9 +256,7 @@ class ChiefRays(PathMethod):
             o = accel.spawn(take(sub.p, lit), take(sub.ng, lit), w_lit, sub.offset[lit])
             blocked = np.flatnonzero(accel.occluded(o, w_lit, np.full(len(lit), np.inf)))
             if len(blocked):
-                face = accel.intersect(take(o, blocked), take(w_lit, blocked)).face
-                spec = face >= 0
-                spec[spec] = self._delta_face[face[spec]]
+                spec, face = self._specular_first(take(o, blocked), take(w_lit, blocked))
                 lost = lit[blocked]
                 if spec.any():
                     np.add.at(through, ii[lost[spec]], luminance3(take(value, lost[spec])))

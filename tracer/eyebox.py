@@ -388,9 +388,7 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
             moved = dataclasses.replace(eye.spec, position=eye.position + x * eye.right + z * eye.up, resolution=(1, 1))
             d = points - moved.position if points is not None else directions
             res = specular_paths(world.with_eye(moved), directions=d, environment=False)
-            lum[j, i], _, through[j, i] = _per_pixel(res["paths"], n)
-            for path in res["paths"]:
-                np.add.at(coarse[j, i], path["pixel"], path["coarse"])
+            lum[j, i], _, through[j, i], coarse[j, i] = _per_pixel(res["paths"], n)
             for k, v in res["specular_blockers"].items():
                 blockers.setdefault(k, set()).update(v)
         if progress is not None:

@@ -279,6 +279,7 @@ class LightTable:
         or one per triangle (T,)."""
         t = self.tris
         levels = np.broadcast_to(np.asarray(level, dtype=np.int64), (len(t),))
+        longest = np.maximum.reduce([norm(e) for e in (t.e1, t.e2, t.e2 - t.e1)])
         parts = []
         for lv in np.unique(levels).tolist():
             idx = np.flatnonzero(levels == lv)
@@ -292,7 +293,6 @@ class LightTable:
             c = b.shape[1]
             v0, e1, e2 = (take(a, idx)[:, :, None] for a in (t.v0, t.e1, t.e2))
             pts = (v0 + b[0] * e1 + b[1] * e2).reshape(3, -1)
-            longest = np.maximum.reduce([norm(e) for e in (t.e1, t.e2, t.e2 - t.e1)])
             parts.append((pts, *(np.repeat(take(a, idx), c, axis=-1)
                                  for a in (t.normal, t.area / c, self.radiance, self.two_sided, longest / lv))))
         if not parts:

@@ -79,16 +79,18 @@ AIM_COVERAGE = 0.98
 BREAKDOWN_PATHS = 3
 
 
-def _per_pixel(paths: list[dict], n: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
-    """(total Y (n,), Y per path [(n,)], through-specular Y (n,)) summed per analysed pixel, cd/m^2."""
-    total, through, per_path = np.zeros(n), np.zeros(n), []
+def _per_pixel(paths: list[dict], n: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
+    """(total Y (n,), Y per path [(n,)], through-specular Y (n,), coarse Y (n,): the part of the total
+    from lights closer than the quadrature resolves) summed per analysed pixel, cd/m^2."""
+    total, through, coarse, per_path = np.zeros(n), np.zeros(n), np.zeros(n), []
     for p in paths:
         y = np.zeros(n)
         np.add.at(y, p["pixel"], luminance(p["luminance"]))
         np.add.at(through, p["pixel"], p["through_specular"])
+        np.add.at(coarse, p["pixel"], p["coarse"])
         total += y
         per_path.append(y)
-    return total, per_path, through
+    return total, per_path, through, coarse
 
 
 def _evenly(idx: np.ndarray, k: int) -> np.ndarray:
@@ -181,15 +183,14 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     grid_h, grid_w = res["grid"]
     pixels = res["pixels"]
     npts = len(pixels)
-    total, per_path, _ = _per_pixel(res["paths"], npts)
+    total, per_path, _, _ = _per_pixel(res["paths"], npts)
     out: dict = {
         "method": "every specular branch followed from the pupil (chief rays for the path list; "
                   f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
                   "directly by the emitters (deterministic quadrature) and by the environment ("
                   f"{ENV_SAMPLES} directions from its own distribution per point); luminance = product of R and T "
-                  "along the "
-                  "chain x luminance behind it" + ("" if environment else "; the environment left out, as the method "
-                                                   "does not render it"),
+                  "along the chain x luminance behind it" + ("" if environment else "; the environment left out, as "
+                                                             "the method does not render it"),
         "assumptions": "light reaches scattering surfaces directly from the emitters and the environment, not "
                        "through specular optics, and from no light closer than the quadrature resolves",
         "grid_stride_px": res["stride"],
@@ -241,10 +242,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         for k, v in pup["specular_blockers"].items():
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
         ends += pup["ends"]
-        p_total, p_per_path, p_through = _per_pixel(pup["paths"], len(sel))
-        coarse = np.zeros(len(sel))
-        for p in pup["paths"]:
-            np.add.at(coarse, p["pixel"], p["coarse"])
+        p_total, p_per_path, p_through, p_coarse = _per_pixel(pup["paths"], len(sel))
         entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
         entry["section_pixels"] = int(len(idx))
         pred = float(p_total.mean())
@@ -273,7 +271,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             reasons.append(f"{key}: scattering surfaces are lit through specular optics the analysis does not follow: "
                            f"{lit}; direct light would add {through:.4g} cd/m^2 to the {pred:.4g} predicted, so the "
                            "prediction is a lower bound")
-        coarse_y = float(coarse.mean())
+        coarse_y = float(p_coarse.mean())
         if coarse_y > SPECULAR_SHARE * pred:
             reasons.append(f"{key}: {coarse_y:.4g} of the {pred:.4g} cd/m^2 predicted comes from lights closer to the "
                            "scattering surfaces than the analysis' quadrature resolves (cells larger than "

@@ -273,8 +273,7 @@ class SweepField:
                     if not hits:
                         names = [o.get("name") for o in node if isinstance(o, dict) and isinstance(o.get("name"), str)]
                         listed = ", ".join(names[:12]) + (f" and {len(names) - 12} more" if len(names) > 12 else "")
-                        literal = [i for i, nm in enumerate(o.get("name") if isinstance(o, dict) else None
-                                                            for o in node) if nm == arg]
+                        literal = [i for i, o in enumerate(node) if isinstance(o, dict) and o.get("name") == arg]
                         hint = (f"; names are globs (*, ? and [...] match), so address it by its index, "
                                 f"objects[{literal[0]}]" if literal else "")
                         bad(f"no object's name matches {arg!r} (objects: {listed or 'none'}){hint}")

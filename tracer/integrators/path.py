@@ -414,17 +414,29 @@ def probe_cut(method: PathMethod, state: PathState, ctx: Context):
     ctx.splats, ctx.rng = type(saved[0])(), ctx.probe_rng
     try:
         still = trace(method, state, ctx, PROBE_DEPTH, probe=False)
-        tally = {comp: float(luminance3(ctx.splats.gather(comp)[2]).sum()) for comp in ctx.splats.parts}
+        probed = ctx.splats
     finally:
         ctx.splats, ctx.found, ctx.rng = saved[:3]
         ctx.store.clear()
         ctx.store.update(saved[3])
         if flags is not None:
             ctx.sample_found[:] = flags
-    for comp, y in tally.items():
-        ctx.store[f"{PROBE_KEY}:{comp}"] = ctx.store.get(f"{PROBE_KEY}:{comp}", 0.0) + y
-    ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
-    ctx.store[STILL_KEY] = ctx.store.get(STILL_KEY, 0) + still
+    tally_probe(ctx.store, probed)
+    tally_cut(ctx.store, len(state), still)
+
+
+def tally_probe(store: dict, splats) -> None:
+    """Add the luminance (sums of Y, not normalised) of a probe's ``splats`` to ``store``, per
+    component, under :data:`PROBE_KEY`."""
+    for comp in splats.parts:
+        key = f"{PROBE_KEY}:{comp}"
+        store[key] = store.get(key, 0.0) + float(luminance3(splats.gather(comp)[2]).sum())
+
+
+def tally_cut(store: dict, cut: int, still: int) -> None:
+    """Add ``cut`` paths cut at max_depth, ``still`` of them still going after the probe, to ``store``."""
+    store[CUT_KEY] = store.get(CUT_KEY, 0) + cut
+    store[STILL_KEY] = store.get(STILL_KEY, 0) + still
 
 
 def _hooked(method: PathMethod, hook: str) -> bool:

@@ -54,16 +54,16 @@ from .backward import BackwardTracer
 from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
 from .forward import Particles
 from .path import (
-    CUT_KEY,
     PROBE_DEPTH,
-    PROBE_KEY,
-    STILL_KEY,
+    CompactedState,
     Context,
     Next,
     PathMethod,
     PathState,
     Timers,
     continue_by_sampling,
+    tally_cut,
+    tally_probe,
     trace,
 )
 
@@ -218,8 +218,7 @@ class PhotonPass(PathMethod):
             still = trace(self, state, ctx, PROBE_DEPTH, probe=False)
         finally:
             ctx.rng, self.stored = rng, stored
-        ctx.store[CUT_KEY] = ctx.store.get(CUT_KEY, 0) + len(state)
-        ctx.store[STILL_KEY] = ctx.store.get(STILL_KEY, 0) + still
+        tally_cut(ctx.store, len(state), still)
 
     def connect(self, state, it, bsdf, ctx):
         keep = np.flatnonzero(state.extra["scattered"] | self.store_direct)
@@ -484,9 +483,7 @@ class PhotonTracer(BackwardTracer):
                     self._gather(probe_ctx, probe_grid, self._vis, np.maximum(per_replicate, 1))
             self._vis = []
         if probe_ctx is not None:
-            for comp in probe_ctx.splats.parts:
-                key = f"{PROBE_KEY}:{comp}"
-                ctx.store[key] = ctx.store.get(key, 0.0) + float(luminance3(probe_ctx.splats.gather(comp)[2]).sum())
+            tally_probe(ctx.store, probe_ctx.splats)
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):
@@ -544,8 +541,7 @@ class PhotonTracer(BackwardTracer):
         go = np.flatnonzero(nxt.alive[:m])
         if len(go) == 0:
             return
-        ray = PathState(take(nxt.o, go), take(nxt.d, go), take(nxt.beta, go), nxt.owner[go], nxt.rep[go],
-                        nxt.pdf[go], nxt.specular[go], {k: take(v, go) for k, v in nxt.extra.items()})
+        ray = CompactedState(take(nxt.o, go), take(nxt.d, go), nxt, go)
         hits = self.world.accel.intersect(ray.o, ray.d)
         if len(self.lights):
             tri = take(self.lights.face_light_ext, hits.face)
