@@ -22,12 +22,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.convergence import RESULTS, errors, reference, reference_seconds, scene_folder  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
-from tracer.integrators.hybrid import CANDIDATES, applicable  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.methods.hybrid import CANDIDATES, applicable  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import luminance  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 PRESETS = ("hud-direct", "hud-direct-condenser", "hud-screen")
 

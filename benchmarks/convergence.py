@@ -36,12 +36,12 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
-from tracer.parallel import render_parallel  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
+from tracer.runtime.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import luminance  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 CACHE = ROOT / "benchmarks" / "cache"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -309,7 +309,7 @@ def write_summary(presets: list[str], budget: float, sections: list[str] = ()) -
 
 
 def main():
-    keep_freed_memory()  # as the command line does (tracer/allocator.py)
+    keep_freed_memory()  # as the command line does (tracer/runtime/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("--presets", nargs="*", default=list(SINGLE_METHOD))
     ap.add_argument("--budgets", type=float, nargs="*", default=[1, 2, 4, 8, 16])

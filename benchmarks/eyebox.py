@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/eyebox.py [PRESET_OR_SCENE] [--field 6 2] [--step 5] [--half 60 30]
 
-Prints the scan of :func:`tracer.eyebox.eyebox_scan` (the brightness-theorem analysis, chief rays
+Prints the scan of :func:`tracer.scans.eyebox.eyebox_scan` (the brightness-theorem analysis, chief rays
 through every specular branch, every LCD cell clear, at five points of the virtual image: the centre
 and 80 % of the half-field toward the corners, fixed in space) as a grid of the eye offsets where
 all five stay at or above 50 % of their value at the design eye, and the eyebox's extent.
@@ -19,14 +19,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.eyebox import eyebox_scan  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
+from tracer.scans.eyebox import eyebox_scan  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 
 def main():
-    keep_freed_memory()  # as the command line does (tracer/allocator.py)
+    keep_freed_memory()  # as the command line does (tracer/runtime/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--field", type=float, nargs=2, default=(6.0, 2.0), help="display field of view, deg")

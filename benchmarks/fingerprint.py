@@ -26,11 +26,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.integrators import Budget  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
+from tracer.methods import Budget  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import luminance  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 
 def fingerprints(rays: int, seed: int, polarisation: str | None = None) -> dict:
@@ -53,7 +53,7 @@ def fingerprints(rays: int, seed: int, polarisation: str | None = None) -> dict:
 
 
 def main():
-    keep_freed_memory()  # as the command line does (tracer/allocator.py)
+    keep_freed_memory()  # as the command line does (tracer/runtime/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("--rays", type=int, default=1_500_000)
     ap.add_argument("--seed", type=int, default=7)

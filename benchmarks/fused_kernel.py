@@ -12,7 +12,7 @@ every call of the windshield's material, so the sizes and the mix of front and b
 render's. Both are checked to agree (directions and weights to float32 rounding, the same branch and
 flags everywhere but where u lies within float32 rounding of R), then timed (best of R) per ray.
 
-The second stage: the scatterer's Gaussian lobe density (tracer.sampling.gaussian_lobe_pdf, an exp per
+The second stage: the scatterer's Gaussian lobe density (tracer.core.sampling.gaussian_lobe_pdf, an exp per
 ray), on the calls the same batches make of it (next-event connections and the mixture's densities),
 checked to agree to float32 rounding (numba's exp is the C library's, numpy's its own SIMD one).
 
@@ -35,12 +35,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import tracer.optics.materials as materials  # noqa: E402
 from presets import PRESETS  # noqa: E402
-from tracer.integrators import INTEGRATORS  # noqa: E402
+from tracer.core.sampling import gaussian_lobe_pdf  # noqa: E402
+from tracer.methods import INTEGRATORS  # noqa: E402
 from tracer.optics.bsdf import DELTA, RADIANCE, REFLECTION, TRANSMISSION, Interaction  # noqa: E402
 from tracer.optics.materials import Dielectric  # noqa: E402
-from tracer.sampling import gaussian_lobe_pdf  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 try:
     import numba

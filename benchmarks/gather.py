@@ -1,10 +1,10 @@
-"""What a gather along the path axis costs in this numpy: the figures behind tracer.vec.take and put.
+"""What a gather along the path axis costs in this numpy: the figures behind tracer.core.vec.take and put.
 
     .venv/bin/python benchmarks/gather.py
 
 Times (best of 5 x 50 calls, microseconds) of taking 60,000 of 65,536 columns of a (3, n) float64
-plane, sorted and permuted, with np.take in its default mode, in mode "wrap" (tracer.vec.take) and
-by fancy indexing, and of writing them back with a fancy assignment and with tracer.vec.put.
+plane, sorted and permuted, with np.take in its default mode, in mode "wrap" (tracer.core.vec.take) and
+by fancy indexing, and of writing them back with a fancy assignment and with tracer.core.vec.put.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tracer.vec import put, take  # noqa: E402
+from tracer.core.vec import put, take  # noqa: E402
 
 
 def best_us(f) -> float:
@@ -36,11 +36,11 @@ def main():
         base = best_us(lambda index=index: np.take(a, index, axis=1))
         wrap = best_us(lambda index=index: take(a, index))
         fancy = best_us(lambda index=index: a[:, index])
-        print(f"gather {label:8s}: np.take {base:7.0f} us, tracer.vec.take (mode wrap) {wrap:7.0f} us "
+        print(f"gather {label:8s}: np.take {base:7.0f} us, tracer.core.vec.take (mode wrap) {wrap:7.0f} us "
               f"({base / wrap:.1f} x as fast), a[:, idx] {fancy:7.0f} us ({fancy / wrap:.1f} x as slow)")
     fancy_set = best_us(lambda: a.__setitem__((slice(None), idx), v))
     rows = best_us(lambda: put(a, idx, v))
-    print(f"scatter sorted : a[:, idx] = v {fancy_set:7.0f} us, tracer.vec.put {rows:7.0f} us "
+    print(f"scatter sorted : a[:, idx] = v {fancy_set:7.0f} us, tracer.core.vec.put {rows:7.0f} us "
           f"({fancy_set / rows:.1f} x as fast)")
 
 

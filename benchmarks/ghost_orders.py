@@ -10,7 +10,7 @@ even mixture of R and the path's own polarised reflectance (tracer.optics.materi
 For each order the table gives the particles that reached the retina, their flux over the primary's
 (against the analysis' ratio over the image) and the relative standard error of that flux
 (sqrt(sum w^2) / sum w over the particles); then the same on the pixels where the primary and ghost 1
-see black LCD cells (as the brightness theorem's background, tracer.render), against the analysis' mean
+see black LCD cells (as the brightness theorem's background, tracer.products.render), against the analysis' mean
 there. A few particles per run on the background mean that forward's estimate of it is a rare-event
 sum: in most runs it misses the higher orders' light, in a few it overshoots, on average it is right.
 """
@@ -28,15 +28,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
-from tracer.analysis import specular_paths  # noqa: E402
-from tracer.hudfigures import erode  # noqa: E402
-from tracer.integrators import Budget  # noqa: E402
-from tracer.integrators.forward import ForwardTracer  # noqa: E402
+from tracer.analysis.hud import erode  # noqa: E402
+from tracer.core.units import luminance, luminance3  # noqa: E402
+from tracer.core.vec import take  # noqa: E402
+from tracer.methods import Budget  # noqa: E402
+from tracer.methods.forward import ForwardTracer  # noqa: E402
 from tracer.optics import materials  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import luminance, luminance3  # noqa: E402
-from tracer.vec import take  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.chains import specular_paths  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 ORDERS = 5
 #: Rays per pixel side of the analysis' means.
@@ -93,8 +93,8 @@ class CountingForward(ForwardTracer):
 def analysis_by_order(world, dielectric_name: str):
     """(image mean by order (ORDERS,), background mask (H W,), background mean by order), cd/m^2: the
     background where the chief ray's primary and ghost 1 see black LCD cells, eroded by one pixel
-    (tracer.hudfigures.erode); the means over PUPIL_GRID^2 rays per pixel (over the pupil and the
-    pixel's area, tracer.analysis.specular_paths), since the pupil blurs the strokes' edges."""
+    (tracer.analysis.hud.erode); the means over PUPIL_GRID^2 rays per pixel (over the pupil and the
+    pixel's area, tracer.transport.chains.specular_paths), since the pupil blurs the strokes' edges."""
     h, w = world.eye.height, world.eye.width
     depth = 2 * ORDERS + 6
     lcd = np.full((2, h * w), np.nan)

@@ -4,7 +4,7 @@
 
 - sensor: the eye sensor against Mitsuba's own ``thinlens`` on analytic-disk (square pixels, finite
   focus), path and particle tracer, same seed: the images must agree to float rounding;
-- diffuser: the Python BSDF's pdf against tracer.sampling.gaussian_lobe_pdf (times tau for its value),
+- diffuser: the Python BSDF's pdf against tracer.core.sampling.gaussian_lobe_pdf (times tau for its value),
   and Mitsuba's chi-square test of its sampling against its pdf (a 20 x 10 degree lobe at 30 degrees
   incidence, so that the test's grid resolves it); the same chi-square test for the Lambertian
   transmitter;
@@ -32,12 +32,12 @@ from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
 
 from benchmarks import mitsuba_scene as ms  # noqa: E402
 from benchmarks.convergence import scene_folder  # noqa: E402
-from tracer.environment import direction_to_equirect  # noqa: E402
-from tracer.imageio import write_exr  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
-from tracer.sampling import frame_from_normal, gaussian_lobe_pdf, to_local  # noqa: E402
+from tracer.core.imageio import write_exr  # noqa: E402
+from tracer.core.sampling import frame_from_normal, gaussian_lobe_pdf, to_local  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import luminance  # noqa: E402
+from tracer.sources.environment import direction_to_equirect  # noqa: E402
 
 #: Largest relative difference (of the image's mean luminance) allowed between the eye sensor and thinlens.
 SENSOR_TOLERANCE = 1e-4
@@ -115,7 +115,8 @@ def check_bsdfs() -> tuple[bool, str]:
     chi_diffuser = _chi2(diffuser, wi)
     chi_transmitter = _chi2(transmitter, wi)
     ok = pdf_err < 1e-4 and value_err < 1e-4 and chi_diffuser and chi_transmitter
-    return ok, (f"- BSDFs: diffuser pdf against tracer.sampling.gaussian_lobe_pdf, largest difference {pdf_err:.2g} "
+    return ok, (f"- BSDFs: diffuser pdf against tracer.core.sampling.gaussian_lobe_pdf, largest difference "
+                f"{pdf_err:.2g} "
                 f"of its peak (value = tau pdf: {value_err:.2g}); chi-square test of sampling against pdf: "
                 f"diffuser {'pass' if chi_diffuser else 'FAIL'}, lambertian_transmitter "
                 f"{'pass' if chi_transmitter else 'FAIL'}")

@@ -49,10 +49,10 @@ from benchmarks import convergence as cv  # noqa: E402
 from benchmarks import mitsuba_scene as ms  # noqa: E402
 from benchmarks.mitsuba_checks import run_checks  # noqa: E402
 from presets import SINGLE_METHOD  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
 from tracer.optics.bsdf import DELTA  # noqa: E402
 from tracer.optics.materials import MATERIALS  # noqa: E402
 from tracer.scene import Scene, load_scene  # noqa: E402
-from tracer.units import luminance  # noqa: E402
 
 KINDS = ("path", "ptracer")
 #: Target wall time of one pass, s.

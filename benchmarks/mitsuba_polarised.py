@@ -38,10 +38,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 import mitsuba as mi  # noqa: E402
 
 from presets._build import frame_matrix  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.core.units import Y_WEIGHTS  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import Y_WEIGHTS  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 THETA = math.radians(67.0)
 NORMAL = np.array([0.0, -math.cos(THETA), math.sin(THETA)])

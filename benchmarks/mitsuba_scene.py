@@ -39,11 +39,11 @@ Materials (tracer/optics/surfaces.py against Mitsuba 3.9's plugins):
 - ``diffuser`` -> :class:`GaussianDiffuser`, a Python BSDF with the tracer's lobe exactly (direction-
   cosine Gaussian about the undeviated direction, sigma along the object's local x and its
   perpendicular, |beta| >= 1 absorbed); mitsuba_checks.py compares its pdf with
-  tracer.sampling.gaussian_lobe_pdf and runs Mitsuba's chi-square test on its sampling.
+  tracer.core.sampling.gaussian_lobe_pdf and runs Mitsuba's chi-square test on its sampling.
 - ``absorber`` -> ``diffuse(reflectance=0)``.
 - ``aperture`` -> nothing (not traced).
 - an object's emission block -> an ``area`` emitter of radiance L c on the object's own BSDF; the
-  luminance from a flux is the tracer's own (tracer.lights.make_emission, at load), so a flux is
+  luminance from a flux is the tracer's own (tracer.sources.lights.make_emission, at load), so a flux is
   converted exactly as the tracer does. Mitsuba's area lights emit on the front side only: a
   two-sided emitter gets a second, flipped copy of its triangles, and both copies are moved
   apart by 1e-5 (1 + max |x|) mm along their own normals so that each is hit first from its side.
@@ -67,7 +67,7 @@ field angle and the aspect ratio of the resolution (Mitsuba's thinlens has squar
 analytic-mirror's 30 x 22.5 deg on 64 x 48 pixels differs by 1 % in height), and an infinite
 accommodation distance is exact. mitsuba_checks.py renders it against Mitsuba's thinlens with square
 pixels: the same image for the same seed. The tracer weights each (pixel point, pupil point) by
-cos^4(theta) / f^2 (tracer/eye.py) instead of 1; the two agree where the luminance is constant over
+cos^4(theta) / f^2 (tracer/transport/eye.py) instead of 1; the two agree where the luminance is constant over
 a pixel's ray bundle, and otherwise differ in second order (cos^4 varies by 4 tan(theta) dtheta
 across a pixel).
 """
@@ -82,11 +82,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from tracer.environment import EnvironmentWithSun, HdriEnvironment, UniformEnvironment
-from tracer.imageio import read_image
+from tracer.core.imageio import read_image
+from tracer.core.units import luminance
 from tracer.optics.materials import MATERIALS
 from tracer.scene import Scene, SceneObject
-from tracer.units import luminance
+from tracer.sources.environment import EnvironmentWithSun, HdriEnvironment, UniformEnvironment
 
 _LLVM = os.environ.get("DRJIT_LIBLLVM_PATH", "")
 #: The Mitsuba variant in use (see the module docstring).
@@ -232,7 +232,7 @@ class ThinLensEye(mi.Sensor):
     Camera frame (``to_world`` columns): x = the eye's left, y = its up, z = the gaze, origin at the
     pupil centre (Mitsuba's look_at frame). A film position (u, v) in [0, 1]^2 (v down) is the
     tangent-plane point p = ((1 - 2u) tan_x, (1 - 2v) tan_y), i.e. the tracer's pixel grid
-    (tracer/eye.py) with x mirrored to the left, as in thinlens.cpp; a lens point a
+    (tracer/transport/eye.py) with x mirrored to the left, as in thinlens.cpp; a lens point a
     (uniform on the disk of radius ``aperture_radius``, mm) looks toward the point of the focal plane
     that images at p: direction ~ (p - a / s, 1), with 1/s = ``inv_focus_distance`` (0 at infinity).
     The ray's weight is 1 and, for the particle tracer, the importance of a point seen from the lens
@@ -441,7 +441,7 @@ def _shapes(obj: SceneObject) -> dict:
 
 def environment(scene: Scene) -> dict | None:
     """The Mitsuba emitter dict of the scene's environment, or None (module docstring). A sun (a disk of
-    finite size, tracer.environment.EnvironmentWithSun) has no Mitsuba counterpart here: refused."""
+    finite size, tracer.sources.environment.EnvironmentWithSun) has no Mitsuba counterpart here: refused."""
     env = scene.environment
     if isinstance(env, EnvironmentWithSun):
         raise NotImplementedError(f"{scene.name}: the Mitsuba peer does not convert the environment's sun (a disk "

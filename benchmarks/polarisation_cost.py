@@ -25,10 +25,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.throughput import set_polarisation  # noqa: E402
 from presets import PRESETS  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 #: (preset, methods) measured.
 CASES = (("hud-direct", ("forward", "backward", "photon")), ("analytic-mirror", ("forward", "backward")))

@@ -34,12 +34,13 @@ from test_photon import _screen  # noqa: E402
 from test_transport import _ring_under_a_smoothed_dome  # noqa: E402
 
 from presets import PRESETS  # noqa: E402
-from tracer import analysis  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget, path  # noqa: E402
-from tracer.render import aim_preflight, brightness_theorem, render_scene  # noqa: E402
+from tracer.core.units import Y_WEIGHTS  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.products.render import aim_preflight, brightness_theorem, render_scene  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import Y_WEIGHTS  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport import chains as analysis  # noqa: E402
+from tracer.transport import path  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 
 def glass_block(tmp: Path):

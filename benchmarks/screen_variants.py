@@ -24,11 +24,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from presets import PRESETS  # noqa: E402
-from tracer.imageio import read_exr_channels, write_png  # noqa: E402
-from tracer.integrators import Budget  # noqa: E402
-from tracer.render import adaptation_luminance, render_folder  # noqa: E402
-from tracer.tonemap import tonemap_ward  # noqa: E402
-from tracer.units import luminance  # noqa: E402
+from tracer.core.imageio import read_exr_channels, write_png  # noqa: E402
+from tracer.core.units import luminance  # noqa: E402
+from tracer.methods import Budget  # noqa: E402
+from tracer.products.render import adaptation_luminance, render_folder  # noqa: E402
+from tracer.products.tonemap import tonemap_ward  # noqa: E402
 
 VARIANTS = (("hud-screen-ideal-lcd", "(a) LCD of absolute contrast"), ("hud-screen", "(b) LCD 300:1"))
 #: The log view spans this many decades below the symbols' luminance.

@@ -10,7 +10,7 @@ bounding box and random directions, best of 5 (the ceiling the speed goal is sta
 very rays each method traces (recorded from 8 of its batches, bounce by bounce, closest-hit and shadow
 queries, and replayed through the same Embree calls, best of 5): the ceiling for that method's ray mix.
 End to end: every method variant (forward; backward with next-event estimation; backward without it,
-the paper's plain method) for S seconds, on one process and on W worker processes (tracer.parallel; the
+the paper's plain method) for S seconds, on one process and on W worker processes (tracer.runtime.parallel; the
 clock starts once every worker has built its world, as in a render, and the start-up is printed apart;
 "workers busy" is the share of the workers' time spent inside batches, the rest the pool's own cost,
 and "per batch" the rays per second inside a worker's batches against one process's: the machine's own
@@ -39,14 +39,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
-from tracer.accel import Accelerator  # noqa: E402
-from tracer.allocator import keep_freed_memory  # noqa: E402
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
-from tracer.integrators.base import DEFAULT_BATCH  # noqa: E402
-from tracer.parallel import render_parallel  # noqa: E402
-from tracer.sampling import make_rng, uniform_sphere  # noqa: E402
+from tracer.core.sampling import make_rng, uniform_sphere  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.methods.base import DEFAULT_BATCH  # noqa: E402
+from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
+from tracer.runtime.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.world import World  # noqa: E402
+from tracer.transport.accel import Accelerator  # noqa: E402
+from tracer.transport.world import World  # noqa: E402
 
 #: The method variants measured: label -> (method, options that differ from the scene's).
 VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
@@ -151,7 +151,7 @@ def own_rays_rate(integrator, batches: int = 8, repeats: int = 5) -> float:
 
 
 def main():
-    keep_freed_memory()  # as the command line does (tracer/allocator.py)
+    keep_freed_memory()  # as the command line does (tracer/runtime/allocator.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("scene", nargs="?", default="hud-direct")
     ap.add_argument("--seconds", type=float, default=20.0)

@@ -8,8 +8,8 @@ disables it at exit, so the bpy module does not hang), the file is opened, its H
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
 DIR receives image.exr (multilayer: Combined, the luminance pass Y and its standard error Y_noise,
 cd/m^2, with the hud:* header fields of the command line's image.exr), report.json (the command
-line's report, tracer.render.build_report, with the .blend's path) and falsecolour.png (Y in false
-colour, logarithmic, with a legend in cd/m^2: tracer.falsecolour), written as a set (tracer.outputs,
+line's report, tracer.products.render.build_report, with the .blend's path) and falsecolour.png (Y in false
+colour, logarithmic, with a legend in cd/m^2: tracer.products.falsecolour), written as a set (tracer.products.outputs,
 as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
 the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
@@ -54,11 +54,11 @@ def enable_from_source(bpy, tmp: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tracer.allocator import keep_freed_memory
     from tracer.cli import Parser, ray_count
-    from tracer.integrators import INTEGRATORS
+    from tracer.methods import INTEGRATORS
+    from tracer.runtime.allocator import keep_freed_memory
 
-    keep_freed_memory()  # this process exists to render (see tracer/allocator.py)
+    keep_freed_memory()  # this process exists to render (see tracer/runtime/allocator.py)
     ap = Parser(prog="hud-render", description="Render a .blend with the HUD Tracer engine.")
     ap.add_argument("blend")
     ap.add_argument("--out", required=True)
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int)
     args = ap.parse_args(argv)
     from tracer.cli import ArgumentError, check_render_args
-    from tracer.outputs import OutputFolderError, OutputSet
+    from tracer.products.outputs import OutputFolderError, OutputSet
 
     blend = Path(args.blend).resolve()
     if not blend.is_file():
@@ -95,13 +95,13 @@ def _blender_reason(error: RuntimeError) -> str:
 
 def _render(args, blend: Path, outputs) -> int:
     """Open ``blend``, render it with Blender's pipeline into a temporary folder and commit the
-    image and the report to ``outputs`` (a locked :class:`tracer.outputs.OutputSet`)."""
+    image and the report to ``outputs`` (a locked :class:`tracer.products.outputs.OutputSet`)."""
     import numpy as np
 
-    from tracer.falsecolour import png_file
-    from tracer.imageio import read_exr_channels
-    from tracer.outputs import OutputFile, OutputWriteError
-    from tracer.render import finite_json
+    from tracer.core.imageio import read_exr_channels
+    from tracer.products.falsecolour import png_file
+    from tracer.products.outputs import OutputFile, OutputWriteError
+    from tracer.products.render import finite_json
 
     tmp = Path(tempfile.mkdtemp(prefix="hud-render-"))
     atexit.register(shutil.rmtree, tmp, ignore_errors=True)

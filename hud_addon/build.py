@@ -10,10 +10,10 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..tracer.integrators import INTEGRATORS
-from ..tracer.lights import EMISSION
+from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import ANALYSER, LEGACY_EMITTER, load_scene
+from ..tracer.sources.lights import EMISSION
 from . import schema_ui
 from .units import unit_mm
 

@@ -9,9 +9,9 @@ ray batches). The Render Result gets Combined (apparent luminance, cd/m^2, linea
 (cd/m^2) and Y_noise (the standard error of Y, cd/m^2), with the hybrid method one RGB pass per
 channel (HUD, Environment: Combined is their sum), and the same hud:* fields as the command
 line's image.exr as stamp data (written into the EXR Blender saves). The command line's report
-(tracer.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
+(tracer.products.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
 hud-render's report.json and the HUD Readouts panel, with the false-colour view of Y
-(tracer.falsecolour) in :data:`FALSE_COLOUR`. When Blender writes the render to a file (F12 with
+(tracer.products.falsecolour) in :data:`FALSE_COLOUR`. When Blender writes the render to a file (F12 with
 write_still, an animation, ``blender -b -a``), the false-colour view and the report are written beside
 it: ``<file>.falsecolour.png`` and ``<file>.report.json`` (:func:`write_beside`).
 """
@@ -27,19 +27,19 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..tracer.errors import SceneError, StoppedBeforeFirstBatch, TracerError
-from ..tracer.falsecolour import false_colour, png_file, write_as_set
-from ..tracer.integrators import INTEGRATORS, Budget
-from ..tracer.render import aim_preflight, finite_json, render_products, run_render
+from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerError
+from ..tracer.core.units import Y_WEIGHTS
+from ..tracer.core.validate import WorkersError, check_workers
+from ..tracer.methods import INTEGRATORS, Budget
+from ..tracer.products.falsecolour import false_colour, png_file, write_as_set
+from ..tracer.products.render import aim_preflight, finite_json, render_products, run_render
 from ..tracer.scene import load_scene
-from ..tracer.units import Y_WEIGHTS
-from ..tracer.validate import WorkersError, check_workers
-from ..tracer.world import World
+from ..tracer.transport.world import World
 from .export import blender_terms, export_scene, generated_image_warnings
 
 #: Extra passes written beside Combined: name -> (channels, channel ids, Blender pass type).
 PASSES = {"Y": (1, "X", "VALUE"), "Y_noise": (1, "X", "VALUE")}
-#: The passes of the hybrid method's channels (tracer.integrators.hybrid): film group -> pass name; each
+#: The passes of the hybrid method's channels (tracer.methods.hybrid): film group -> pass name; each
 #: an RGB pass of that channel's apparent luminance, cd/m^2 (Combined is their sum).
 CHANNEL_PASSES = {"hud": "HUD", "environment": "Environment"}
 
@@ -54,7 +54,7 @@ def passes_of(method: str) -> dict:
 UNITS = ("Combined (R,G,B), Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
          "Y_noise: standard error of Y, cd/m^2; HUD, Environment (hybrid method): each channel's R,G,B, cd/m^2")
 
-#: The report of the last final render (tracer.render.build_report, as the command line writes it),
+#: The report of the last final render (tracer.products.render.build_report, as the command line writes it),
 #: or {"error": message} when it failed. Read by hud-render for its report.json.
 LAST_RENDER: dict = {}
 #: The last report of each scene by name: what the HUD Readouts panel shows.
@@ -209,7 +209,7 @@ def written_file(scene) -> Path | None:
 @bpy.app.handlers.persistent  # kept when a file is opened (hud-render opens one after enabling us)
 def write_beside(scene, *_):
     """render_write handler: beside the file Blender has just written for ``scene``'s frame, the
-    false-colour view and the report of that render (each written as a set: tracer.outputs)."""
+    false-colour view and the report of that render (each written as a set: tracer.products.outputs)."""
     report = REPORTS.get(scene.name)
     if report is None or report.get("blender", {}).get("frame") != scene.frame_current:
         return

@@ -1,4 +1,4 @@
-"""Blender data -> the tracer's scene format (tracer/scene.py), and nothing else.
+"""Blender data -> the tracer's scene format (tracer/scene/load.py), and nothing else.
 
 Only objects with an optical role that a render shows are exported, as the depsgraph evaluates them
 (:func:`exported_objects`: at its frame, modifiers applied, every instance an object of its own);
@@ -30,13 +30,13 @@ import bpy
 import numpy as np
 
 from ..presets._build import write_obj
-from ..tracer.environment import SUN_MAX_ANGULAR_DIAMETER_DEG
-from ..tracer.imageio import write_exr
-from ..tracer.integrators import INTEGRATORS
-from ..tracer.lights import EMISSION
+from ..tracer.core.imageio import write_exr
+from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
-from ..tracer.outputs import replace_folder
+from ..tracer.products.outputs import replace_folder
 from ..tracer.scene import ANALYSER
+from ..tracer.sources.environment import SUN_MAX_ANGULAR_DIAMETER_DEG
+from ..tracer.sources.lights import EMISSION
 from . import schema_ui
 from .units import unit_mm
 
@@ -332,7 +332,7 @@ def _sun_lights(depsgraph) -> list[dict]:
 
 
 def sun_spec(depsgraph) -> dict | None:
-    """The scene.json sun block (tracer.environment.Sun) of the one Sun light ``depsgraph`` shows, None
+    """The scene.json sun block (tracer.sources.environment.Sun) of the one Sun light ``depsgraph`` shows, None
     without one: its direction (toward the sun, as evaluated: an animated sun moves), angular diameter
     (Blender's Angle), colour (the light's Color) and illuminance (HUD Sun > Illuminance). Blender's own
     Strength is not used: the tracer's sun is photometric. Raises ValueError naming the lights when more

@@ -11,20 +11,20 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ..presets import PRESETS
-from ..tracer.errors import SceneError, TracerError
-from ..tracer.eyebox import OUTPUT_NAMES as EYEBOX_FILES
-from ..tracer.eyebox import FieldNotFound, ScanArgumentError, eyebox_scan
-from ..tracer.eyebox import output_files as eyebox_files
-from ..tracer.integrators import INTEGRATORS
-from ..tracer.outputs import OutputSet
+from ..tracer.core.errors import SceneError, TracerError
+from ..tracer.methods import INTEGRATORS
+from ..tracer.products.outputs import OutputSet
+from ..tracer.scans.eyebox import OUTPUT_NAMES as EYEBOX_FILES
+from ..tracer.scans.eyebox import FieldNotFound, ScanArgumentError, eyebox_scan
+from ..tracer.scans.eyebox import output_files as eyebox_files
 from ..tracer.scene import load_scene
-from ..tracer.world import World
+from ..tracer.transport.world import World
 from . import engine
 from .build import build_scene
 from .export import blender_terms, export_scene
 from .units import unit_mm
 
-#: The last eyebox sweep of each scene by name: its summary (tracer.eyebox.EyeboxResult.summary), the
+#: The last eyebox sweep of each scene by name: its summary (tracer.scans.eyebox.EyeboxResult.summary), the
 #: grid of offsets inside the eyebox and the folder it was written to; the HUD Readouts panel shows it.
 EYEBOX: dict[str, dict] = {}
 

@@ -16,12 +16,12 @@ from bpy.props import (
     StringProperty,
 )
 
-from ..tracer.environment import SUN_ILLUMINANCE_LX
-from ..tracer.integrators import DEFAULT_METHOD, INTEGRATORS
-from ..tracer.lights import EMISSION
+from ..tracer.core.schema import check_consistent
+from ..tracer.methods import DEFAULT_METHOD, INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import ANALYSER, POLARISATION_MODES
-from ..tracer.schema import check_consistent
+from ..tracer.sources.environment import SUN_ILLUMINANCE_LX
+from ..tracer.sources.lights import EMISSION
 from .schema_ui import annotations
 from .units import angle_twin, length_twin
 

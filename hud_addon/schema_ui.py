@@ -1,4 +1,4 @@
-"""The tracer's schemas (tracer/schema.py) turned into Blender properties, panel rows, scene.json blocks
+"""The tracer's schemas (tracer/core/schema.py) turned into Blender properties, panel rows, scene.json blocks
 and back: the one place where a field of a material, of the emission block or of a method's options
 becomes something a user sets in Blender. A new material or method option appears here without any
 change in the add-on.
@@ -26,7 +26,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from ..tracer.schema import REQUIRED, Field, to_json
+from ..tracer.core.schema import REQUIRED, Field, to_json
 from .units import SHOWN, angle_twin, length_twin
 
 #: Field kinds with one value (size 0) or two.
@@ -53,7 +53,7 @@ def _default(f: Field):
 
 
 def prop(f: Field):
-    """The Blender property of one field (kinds of tracer.schema)."""
+    """The Blender property of one field (kinds of tracer.core.schema)."""
     d = _default(f)
     common = {"name": f.title, "description": _tooltip(f)}
     lo = -1e30 if f.minimum is None else f.minimum
@@ -149,7 +149,7 @@ LINEAR_SPACES = frozenset({"Non-Color", "Linear Rec.709", "Linear", "Raw", "Line
 
 
 def _encoding_field(f: Field, fields) -> bool:
-    """Whether ``f`` is the encoding of a sibling image field (tracer.schema's ``<name>_encoding``)."""
+    """Whether ``f`` is the encoding of a sibling image field (tracer.core.schema's ``<name>_encoding``)."""
     return f.kind == "choice" and f.name.endswith("_encoding") and any(
         g.kind == "image" and f.name == f"{g.name}_encoding" for g in fields)
 

@@ -4,12 +4,12 @@ import math
 
 import bpy
 
-from ..tracer.environment import Sun
-from ..tracer.hudfigures import readouts
-from ..tracer.integrators import INTEGRATORS
-from ..tracer.lights import EMISSION
+from ..tracer.analysis.hud import readouts
+from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import ANALYSER
+from ..tracer.sources.environment import Sun
+from ..tracer.sources.lights import EMISSION
 from . import engine, operators, schema_ui
 
 ENGINE = "HUD_TRACER"

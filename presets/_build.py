@@ -163,7 +163,7 @@ class SceneBuilder:
     def add(self, name: str, mesh, material: dict, transform: list | None = None, smooth: bool = False,
             uv: np.ndarray | None = None, emission: dict | None = None):
         """Add an object: its mesh (vertices, faces), material block, 4 x 4 transform, and the
-        emission block of an object that emits (tracer.lights.EMISSION)."""
+        emission block of an object that emits (tracer.sources.lights.EMISSION)."""
         vertices, faces = mesh[0], mesh[1]
         rel = f"meshes/{name}.obj"
         write_obj(self.folder / rel, np.asarray(vertices), np.asarray(faces), uv)

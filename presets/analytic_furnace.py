@@ -1,7 +1,7 @@
 """analytic-furnace: the eye inside a closed Lambertian emitter sphere of luminance L0.
 
 Closed form: every pixel shows L0, whatever the pupil, the focus or the field angle (paper eq. 2-3 with
-the exact pupil extent of tracer.eye). Both methods apply: backward rays hit the sphere, forward
+the exact pupil extent of tracer.transport.eye). Both methods apply: backward rays hit the sphere, forward
 particles leave it (aimed at the pupil).
 """
 

@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 
 try:  # inside the Blender extension, presets and tracer are subpackages of the extension package
-    from ..tracer.environment import panorama_rgb, row_solid_angle_fractions
-    from ..tracer.imageio import read_image, write_exr
-    from ..tracer.units import luminance
+    from ..tracer.core.imageio import read_image, write_exr
+    from ..tracer.core.units import luminance
+    from ..tracer.sources.environment import panorama_rgb, row_solid_angle_fractions
 except ImportError:  # presets and tracer as top-level packages (command line, tests)
-    from tracer.environment import panorama_rgb, row_solid_angle_fractions
-    from tracer.imageio import read_image, write_exr
-    from tracer.units import luminance
+    from tracer.core.imageio import read_image, write_exr
+    from tracer.core.units import luminance
+    from tracer.sources.environment import panorama_rgb, row_solid_angle_fractions
 
 #: The panoramas of Blender's studio lights (``<name>.exr``).
 STUDIO_HDRIS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
@@ -83,9 +83,9 @@ def panorama_stats(path) -> dict:
 
     - ``min``, ``max``: the smallest and largest pixel luminance (the measures of the "min" and "max"
       calibrations);
-    - ``mean``: the solid-angle-weighted mean, exactly :class:`tracer.environment.HdriEnvironment`'s
+    - ``mean``: the solid-angle-weighted mean, exactly :class:`tracer.sources.environment.HdriEnvironment`'s
       (the measure of the "mean" calibration): each pixel weighs its row's exact solid angle
-      (:func:`tracer.environment.row_solid_angle_fractions`);
+      (:func:`tracer.sources.environment.row_solid_angle_fractions`);
     - ``p01``, ``p99``: the 1st and 99th percentiles over the sphere: the smallest pixel luminance
       such that the pixels at or below it cover at least 1 % (99 %) of the sphere's solid angle (pixel
       counts would overweight the rows near the poles, which an equirectangular image stretches);

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 try:  # inside the Blender extension, presets and tracer are subpackages of the extension package
-    from ..tracer.imageio import write_png
+    from ..tracer.core.imageio import write_png
 except ImportError:  # presets and tracer as top-level packages (command line, tests)
-    from tracer.imageio import write_png
+    from tracer.core.imageio import write_png
 
 FONT = {  # 5 x 7 glyphs, one string of five bits per row, top row first
     "0": ["01110", "10001", "10011", "10101", "11001", "10001", "01110"],

@@ -24,17 +24,17 @@ from ._build import write_obj
 from .hdri import copy_panorama, studio_hdri
 
 try:  # inside the Blender extension, presets and tracer are subpackages of the extension package
-    from ..tracer.environment import HdriEnvironment
-    from ..tracer.eye import ThinLensEye
-    from ..tracer.imageio import read_image
+    from ..tracer.core.imageio import read_image
+    from ..tracer.core.units import luminance
     from ..tracer.scene import load_scene
-    from ..tracer.units import luminance
+    from ..tracer.sources.environment import HdriEnvironment
+    from ..tracer.transport.eye import ThinLensEye
 except ImportError:  # presets and tracer as top-level packages (command line, tests)
-    from tracer.environment import HdriEnvironment
-    from tracer.eye import ThinLensEye
-    from tracer.imageio import read_image
+    from tracer.core.imageio import read_image
+    from tracer.core.units import luminance
     from tracer.scene import load_scene
-    from tracer.units import luminance
+    from tracer.sources.environment import HdriEnvironment
+    from tracer.transport.eye import ThinLensEye
 
 #: The study's view: full field (deg) and retina, 30 pixels per degree (the HUD presets' own view is
 #: 7 x 2.6 deg at 60 px/deg: the symbols alone).

@@ -648,7 +648,7 @@ def scenario_unsupported_output(out):
     has 1 GiB): the error Blender reports, and the files written."""
     module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
     engine_mod = sys.modules[f"{module}.hud_addon.engine"]
-    validate = sys.modules[f"{module}.tracer.validate"]
+    validate = sys.modules[f"{module}.tracer.core.validate"]
     cases = {"region, cropped": {"use_border": True, "use_crop_to_border": True},
              "region": {"use_border": True, "use_crop_to_border": False},
              "stereoscopy": {"use_multiview": True},
@@ -808,7 +808,7 @@ def scenario_readouts(out):
     bpy.ops.render.render(write_still=True)
     pkg = f"{module}.hud_addon"
     engine_mod, ui_mod = sys.modules[f"{pkg}.engine"], sys.modules[f"{pkg}.ui"]
-    rows = sys.modules[f"{module}.tracer.hudfigures"].readouts(engine_mod.REPORTS[scene.name])
+    rows = sys.modules[f"{module}.tracer.analysis.hud"].readouts(engine_mod.REPORTS[scene.name])
     labels = []
 
     class Panel:
@@ -1023,7 +1023,7 @@ def scenario_polarisation(out):
     except RuntimeError as e:  # the operator's report
         refused = str(e)
     load_scene = sys.modules[f"{module}.tracer.scene"].load_scene
-    scene_error = sys.modules[f"{module}.tracer.errors"].SceneError
+    scene_error = sys.modules[f"{module}.tracer.core.errors"].SceneError
     in_blender_terms = []  # what an F12 render says (the engine's export, then blender_terms)
     for _ in range(2):
         export_mod.export_scene(bpy.context.evaluated_depsgraph_get(), out / "off_unchecked")

@@ -13,9 +13,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tracer.integrators import INTEGRATORS, Budget  # noqa: E402
+from tracer.core.units import Y_WEIGHTS  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
-from tracer.units import Y_WEIGHTS  # noqa: E402
 
 
 def _sidak(m: int, alpha: float) -> float:

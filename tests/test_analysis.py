@@ -1,4 +1,4 @@
-"""The brightness-theorem analysis in report.json (tracer.analysis, tracer.render.brightness_theorem):
+"""The brightness-theorem analysis in report.json (tracer.transport.chains, tracer.products.render.brightness_theorem):
 its prediction integrates over the pupil, says when its assumptions fail, predicts only what the
 method renders, and its breakdown by path sums to its total."""
 
@@ -13,11 +13,11 @@ import pytest
 from conftest import edit_json, render, t_bound, z_bound
 
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle, write_obj
-from tracer.integrators import INTEGRATORS, Budget
-from tracer.render import brightness_theorem, render_scene
+from tracer.core.units import Y_WEIGHTS
+from tracer.methods import INTEGRATORS, Budget
+from tracer.products.render import brightness_theorem, render_scene
 from tracer.scene import load_scene
-from tracer.units import Y_WEIGHTS
-from tracer.world import World
+from tracer.transport.world import World
 
 #: The Maxwellian-view scene: a concave spherical mirror (radius of curvature RC mm, reflectance R)
 #: images an LED disk (radius R_LED mm, luminance L cd/m^2) placed DELTA mm beside its centre of
@@ -162,7 +162,7 @@ def test_an_aim_that_misses_light_is_told_before_the_first_ray(preset, tmp_path)
     for the methods whose particles follow the aims (forward, photon); the command line prints it
     before its progress bar. Backward tracing, whose eye paths do not use the emitters' aims, is told
     nothing."""
-    from tracer.render import AIM_COVERAGE, aim_preflight
+    from tracer.products.render import AIM_COVERAGE, aim_preflight
 
     folder = _mirror_behind_glass(preset)
     world = World(load_scene(folder))
@@ -185,7 +185,7 @@ def test_every_presets_aims_cover_the_light_that_reaches_the_eye(tmp_path):
     field, 99.8 % for analytic-mirror's 64-gon pupil image, 100 % elsewhere), above the line from which
     the particle methods warn of an aim."""
     from presets import PRESETS
-    from tracer.render import AIM_COVERAGE, aim_preflight
+    from tracer.products.render import AIM_COVERAGE, aim_preflight
 
     seen = 0
     for name, module in PRESETS.items():
@@ -255,7 +255,7 @@ def test_the_quadrature_is_coarse_only_where_the_light_is_small_for_its_distance
     """The LEDs' quadrature level follows their size over their distance to the nearest scattering
     surface (relative error ~ (h/d)^2 < 1e-4): hud-direct's 0.2 mm dies need one point each instead of
     16 (the analysis ran 5 s, now under 1 s), and the predictions agree with 16 points to 1e-4."""
-    from tracer import analysis
+    from tracer.transport import chains as analysis
 
     world = World(load_scene(hud_with_sky))
     levels = analysis.quadrature_levels(world)
@@ -274,7 +274,7 @@ def test_a_large_light_close_to_a_screen_keeps_the_fine_quadrature(tmp_path):
     """The screen lit directly by a 6 mm LED 60 mm away (cells of 3 mm would be 5 % of the distance):
     level 4, the finest (test_without_the_glass_the_same_screen_is_compared checks that prediction
     against the render)."""
-    from tracer import analysis
+    from tracer.transport import chains as analysis
 
     folder = condenser_scene(tmp_path / "s")
     edit_json(folder, lambda d: d.update(objects=[o for o in d["objects"] if o["name"] != "glass"]))
@@ -309,7 +309,7 @@ def test_a_light_closer_than_the_quadrature_resolves_is_not_compared(tmp_path):
     missed light (a hand-built scene). The section is now marked not comparable, with the reason, and
     the render gets no missing-light warning. 30 mm away (cells 2.4 times the distance: 3.4 % off) it is
     not compared either; 600 mm away (cells 0.12 of it) it is, and the prediction is Lambert's."""
-    from tracer.render import render_scene
+    from tracer.products.render import render_scene
 
     report, _ = render_scene(load_scene(_backlit_screen(tmp_path / "near", 1.0)), "backward", Budget(rays=300_000),
                              1, tmp_path / "o")
@@ -354,7 +354,7 @@ def test_the_environment_lights_scattering_surfaces_in_the_prediction(tmp_path):
     hand-built scene). It now draws 32 directions from the environment at each surface point: the
     road is predicted at rho (E sin h / pi + L_sky) within its standard error and agrees with backward
     tracing. Under a glass roof, which the analysis does not follow, the section is not compared."""
-    from tracer.render import render_scene
+    from tracer.products.render import render_scene
 
     expected = 0.2 * (1e5 * math.sin(math.radians(30.0)) / math.pi + 1000.0)
     report, _ = render_scene(load_scene(_sunlit_road(tmp_path / "road")), "backward", Budget(rays=1_000_000), 1,
@@ -370,10 +370,10 @@ def test_the_environment_lights_scattering_surfaces_in_the_prediction(tmp_path):
 
 
 def test_readouts_give_the_reports_figures(preset, tmp_path):
-    """The HUD Readouts panel's rows (tracer.hudfigures.readouts) state the report's own numbers."""
-    from tracer.hudfigures import readouts
-    from tracer.integrators import Budget
-    from tracer.render import render_scene
+    """The HUD Readouts panel's rows (tracer.analysis.hud.readouts) state the report's own numbers."""
+    from tracer.analysis.hud import readouts
+    from tracer.methods import Budget
+    from tracer.products.render import render_scene
     from tracer.scene import load_scene
 
     report, _ = render_scene(load_scene(preset("hud-direct")), "backward", Budget(rays=2_000_000), 3, tmp_path / "o")

@@ -5,8 +5,8 @@ import numpy as np
 from chi2 import ChiSquareTest
 
 from presets._build import frame_matrix, rectangle
-from tracer.apertures import MeshTarget
-from tracer.sampling import make_rng
+from tracer.core.sampling import make_rng
+from tracer.transport.apertures import MeshTarget
 
 
 def _target():

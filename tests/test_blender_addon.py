@@ -209,8 +209,8 @@ def test_hud_render_renders_a_saved_blend(tmp_path):
     ch = read_multilayer(out / "image.exr")
     y = ch["ViewLayer.Y.X"]
     assert np.all(np.isfinite(y)) and abs(y.max() - 850.0) < 0.02 * 850
-    from tracer.falsecolour import false_colour
-    from tracer.imageio import read_image
+    from tracer.core.imageio import read_image
+    from tracer.products.falsecolour import false_colour
 
     expected, _ = false_colour(y.astype(np.float64))
     got = np.rint(read_image(out / "falsecolour.png", linear=True) * 255).astype(np.uint8)
@@ -458,7 +458,7 @@ def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
     # Every file of the add-on's packages, as the build sees them on disk (untracked ones too).
     shipped = {p.relative_to(ROOT).as_posix() for d in ("tracer", "hud_addon", "presets")
                for p in (ROOT / d).rglob("*") if p.is_file() and "__pycache__" not in p.parts}
-    shipped -= {"tracer/distributed.py"}
+    shipped -= {"tracer/runtime/distributed.py"}
     for platform, name in names.items():
         z = zipfile.ZipFile(dist / name)
         entries = [n for n in z.namelist() if not n.endswith("/")]
@@ -467,8 +467,8 @@ def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
         assert top == wanted, f"{name}: unused {sorted(top - wanted)}, missing {sorted(wanted - top)}"
         code = {n for n in entries if n.startswith(("tracer/", "hud_addon/", "presets/"))}
         assert code == shipped, f"{name}: unused {sorted(code - shipped)}, missing {sorted(shipped - code)}"
-        for unused in ("README.md", "Makefile", "requirements.lock", "requirements-bench.lock", "tracer/distributed.py",
-                       ".git", ".gitignore"):
+        for unused in ("README.md", "Makefile", "requirements.lock", "requirements-bench.lock",
+                       "tracer/runtime/distributed.py", ".git", ".gitignore"):
             assert unused not in entries, (name, unused)
         assert not any(n.startswith(("tests/", "benchmarks/", "docs/", "tools/", ".ci/", ".venv")) or n.endswith(".pyc")
                        for n in entries), name
@@ -585,8 +585,8 @@ def test_false_colour_view_of_hud_direct_in_blender_and_beside_the_render(readou
     render's Y; a render written to a file gets it beside it."""
     res, out = readouts_run
     assert res["false_colour"]["size"] == res["false_colour"]["expected_size"]
-    from tracer.falsecolour import false_colour
-    from tracer.imageio import read_image
+    from tracer.core.imageio import read_image
+    from tracer.products.falsecolour import false_colour
 
     y = read_multilayer(out / "frame.exr")["ViewLayer.Y.X"].astype(np.float64)
     got = np.rint(read_image(out / "frame.exr.falsecolour.png", linear=True) * 255).astype(np.uint8)
@@ -628,8 +628,8 @@ def test_a_sun_light_exports_as_the_environments_sun(tmp_path):
     np.testing.assert_allclose(sun2["direction"], [s60, 0.0, c60], atol=1e-6)
     np.testing.assert_allclose(sun2["direction"], res["directions"]["frame2"], atol=1e-6)
     assert res["spec_direct"]["direction"] == pytest.approx(sun1["direction"], abs=1e-6)
-    from tracer.environment import EnvironmentWithSun, HdriEnvironment
     from tracer.scene import load_scene
+    from tracer.sources.environment import EnvironmentWithSun, HdriEnvironment
 
     sc = load_scene(tmp_path / "frame1")
     assert isinstance(sc.environment, EnvironmentWithSun)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, edit_json, render
 
-from tracer.imageio import read_exr_channels
+from tracer.core.imageio import read_exr_channels
 from tracer.scene import MESH_SUFFIXES
 
 
@@ -179,8 +179,8 @@ def test_meshes_load_from_every_format_the_scene_format_names(preset, ext):
 def test_two_processes_give_the_same_image_as_one(preset, method):
     """Seed-addressed batches merged in order: the same film on one and on two processes (to the
     last bits of rounding)."""
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import films_match, render_parallel
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import films_match, render_parallel
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
@@ -193,9 +193,9 @@ def test_two_processes_give_the_same_image_as_one(preset, method):
 def test_dask_cluster_gives_the_same_image(preset):
     """The same seed-addressed batches on a Dask LocalCluster merge to the local image."""
     distributed = pytest.importorskip("distributed")
-    from tracer.distributed import render_dask
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import films_match
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.distributed import render_dask
+    from tracer.runtime.parallel import films_match
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
@@ -215,8 +215,8 @@ def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(prese
     import importlib
     import types
 
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import films_match
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import films_match
     from tracer.scene import load_scene
 
     repo = tmp_path / "repo"
@@ -226,8 +226,8 @@ def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(prese
     made_up.__path__ = [str(repo)]
     sys.modules["hud_made_up"] = made_up
     try:
-        parallel = importlib.import_module("hud_made_up.hud_tracer.tracer.parallel")
-        integrators = importlib.import_module("hud_made_up.hud_tracer.tracer.integrators")
+        parallel = importlib.import_module("hud_made_up.hud_tracer.tracer.runtime.parallel")
+        integrators = importlib.import_module("hud_made_up.hud_tracer.tracer.methods")
         scene_mod = importlib.import_module("hud_made_up.hud_tracer.tracer.scene")
         assert parallel._made_up_packages() == [("hud_made_up", [str(repo)])]
         folder = preset("analytic-mirror")
@@ -235,7 +235,7 @@ def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(prese
         two = parallel.render_parallel(integrators.INTEGRATORS["backward"](scene_mod.load_scene(folder), 5),
                                        integrators.Budget(rays=800_000), workers=2,
                                        preview=lambda film: previews.append(film.replicates))
-        assert type(two).__module__ == "hud_made_up.hud_tracer.tracer.integrators.base"
+        assert type(two).__module__ == "hud_made_up.hud_tracer.tracer.methods.base"
     finally:
         for name in [n for n in sys.modules if n == "hud_made_up" or n.startswith("hud_made_up.")]:
             del sys.modules[name]
@@ -251,8 +251,8 @@ def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tm
     import shutil
     import time
 
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import render_parallel
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
     folder = preset("analytic-mirror")
@@ -267,8 +267,8 @@ def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tm
 def test_readouts_prints_the_reports_figures(tmp_path):
     """hud-trace readouts DIR prints one row per figure of the report (the add-on's HUD Readouts); a file
     that is not a report gives one line and exit 2."""
+    from tracer.analysis.hud import readouts
     from tracer.cli import main
-    from tracer.hudfigures import readouts
 
     out = tmp_path / "r"
     assert main(["render", "analytic-mirror", "--rays", "300000", "--seed", "2", "--out", str(out), "--quiet"]) == 0
@@ -288,8 +288,8 @@ def test_readouts_prints_the_reports_figures(tmp_path):
 def test_workers_refuse_a_scene_folder_that_changed_since_the_render_began(preset):
     """Workers load the scene from its folder: one edited after the render began (here in the parent's
     memory, as a script might) would render another scene in them; the render stops and says so."""
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import render_parallel
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
     folder = preset("analytic-mirror")

@@ -1,4 +1,4 @@
-"""Tests of tracer.environment: Blender's equirectangular mapping, rotation, calibration,
+"""Tests of tracer.sources.environment: Blender's equirectangular mapping, rotation, calibration,
 the three environment kinds, the sun and the scene.json factory (the sun's sampling and renders
 with it: tests/test_sun.py)."""
 
@@ -16,7 +16,10 @@ import OpenImageIO as oiio
 import pytest
 from conftest import z_bound
 
-from tracer.environment import (
+from tracer.core.errors import SceneError
+from tracer.core.imageio import write_exr
+from tracer.core.units import luminance
+from tracer.sources.environment import (
     CALIBRATION_MODES,
     EnvironmentWithSun,
     HdriEnvironment,
@@ -28,9 +31,6 @@ from tracer.environment import (
     equirect_to_direction,
     row_solid_angle_fractions,
 )
-from tracer.errors import SceneError
-from tracer.imageio import write_exr
-from tracer.units import luminance
 
 
 def _uniform_sphere(n: int, seed: int) -> np.ndarray:
@@ -702,7 +702,7 @@ def test_panorama_stats_of_a_studio_panorama_agree_with_the_environment(name, tm
     (scale 1) are the copy's figures; the percentiles cut the sphere's solid angle at 1 % and 99 % (the
     pixels below p01 cover less than 1 % of it, those at or below it at least 1 %)."""
     from presets.hdri import copy_panorama, panorama_stats, studio_hdri
-    from tracer.imageio import read_image
+    from tracer.core.imageio import read_image
 
     raw = panorama_stats(studio_hdri(name))
     negative = copy_panorama(studio_hdri(name), tmp_path / "textures" / "sky.exr")

@@ -1,4 +1,4 @@
-"""The eyebox scan (tracer.eyebox): a scene whose eyebox has a closed form, the design-eye value
+"""The eyebox scan (tracer.scans.eyebox): a scene whose eyebox has a closed form, the design-eye value
 against the brightness theorem's prediction, the CSV round trip, the chart, a scene the analysis
 cannot predict, and ``hud-trace eyebox`` with its refusals."""
 
@@ -12,7 +12,10 @@ import pytest
 from conftest import ROOT
 
 from presets._build import SceneBuilder, frame_bars, frame_matrix, rectangle
-from tracer.eyebox import (
+from tracer.core.imageio import read_image, write_png
+from tracer.products.falsecolour import colour_map
+from tracer.products.render import brightness_theorem
+from tracer.scans.eyebox import (
     FIELD_POINTS,
     OUTLINE,
     FieldNotFound,
@@ -23,11 +26,8 @@ from tracer.eyebox import (
     read_csv,
     write_csv,
 )
-from tracer.falsecolour import colour_map
-from tracer.imageio import read_image, write_png
-from tracer.render import brightness_theorem
 from tracer.scene import load_scene
-from tracer.world import World
+from tracer.transport.world import World
 
 #: The framed-LCD scene: an emitter panel (luminance L cd/m^2) seen through an LCD (transmittance T,
 #: contrast CR, half-sizes A mm, its slide black in a middle band) in an absorbing frame, both below
@@ -127,7 +127,7 @@ def test_the_eyebox_of_a_framed_lcd_follows_from_similar_triangles(framed, tmp_p
 
 
 def test_the_design_eye_value_is_the_brightness_theorems_prediction(framed):
-    """tracer.render.brightness_theorem predicts the clear cells ("symbol") at L R T over the pupil;
+    """tracer.products.render.brightness_theorem predicts the clear cells ("symbol") at L R T over the pupil;
     the scan, which clears every cell, reads the same at the design eye for every field point
     (the black band at the centre of the slide included)."""
     _, world, r = framed

@@ -1,4 +1,4 @@
-"""The false-colour luminance view (tracer.falsecolour): the log scale through the colour map, the
+"""The false-colour luminance view (tracer.products.falsecolour): the log scale through the colour map, the
 no-light colour, clamping, the legend's ticks and labels read back from the pixels, and
 ``hud-trace false-colour`` with its refusals."""
 
@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from tracer.errors import SceneError
-from tracer.falsecolour import (
+from tracer.core.errors import SceneError
+from tracer.core.imageio import read_image, srgb_decode, write_exr
+from tracer.core.units import luminance
+from tracer.products.falsecolour import (
     ADVANCE,
     FONT,
     GLYPH_DESCENT,
@@ -28,8 +30,6 @@ from tracer.falsecolour import (
     save_false_colour,
     text_bitmap,
 )
-from tracer.imageio import read_image, srgb_decode, write_exr
-from tracer.units import luminance
 
 
 def hud_trace(*args):

@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from tracer import cli
-from tracer.imageio import read_exr_channels
+from tracer.core.imageio import read_exr_channels
 
 SEED = 20261130
 CASES = 300

@@ -1,4 +1,4 @@
-"""The hybrid method and the automatic choice of a method (tracer/integrators/hybrid.py, issue 12)."""
+"""The hybrid method and the automatic choice of a method (tracer/methods/hybrid.py, issue 12)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from conftest import edit_json, film_dof, t_bound, welch_dof
 
-from tracer.integrators import INTEGRATORS, Budget
-from tracer.integrators.hybrid import applicable, combined_image, relative_variances
-from tracer.parallel import films_match, render_parallel
-from tracer.pupil import pupil_diameter_mm
-from tracer.render import adaptation_luminance
+from tracer.core.units import luminance
+from tracer.methods import INTEGRATORS, Budget
+from tracer.methods.hybrid import applicable, combined_image, relative_variances
+from tracer.optics.pupil import pupil_diameter_mm
+from tracer.products.render import adaptation_luminance
+from tracer.runtime.parallel import films_match, render_parallel
 from tracer.scene import load_scene
-from tracer.units import luminance
-from tracer.world import World
+from tracer.transport.world import World
 
 #: A third of hud-direct's retina in each direction: the same optics, a ninth of the pixels.
 LOW = (140, 52)
@@ -273,7 +273,7 @@ def test_the_pupil_follows_the_adaptation_luminance_of_the_image(preset):
     """eye "pupil_diameter_mm": "auto" with "adaptation_luminance_cd_m2": "image": a pilot finds the
     adaptation luminance (here the mean) of what the eye sees and Watson & Yellott's formula gives the
     pupil; the report says both, and they agree with the final image's own adaptation luminance."""
-    from tracer.render import render_scene
+    from tracer.products.render import render_scene
 
     folder = preset("hud-direct", resolution=LOW)
     _sky(folder, 3000.0)

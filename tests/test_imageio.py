@@ -1,4 +1,4 @@
-"""Tests of tracer.imageio: sRGB curves, reading images, writing EXR and PNG atomically."""
+"""Tests of tracer.core.imageio: sRGB curves, reading images, writing EXR and PNG atomically."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from tracer.errors import ImageReadError
-from tracer.imageio import (
+from tracer.core.errors import ImageReadError
+from tracer.core.imageio import (
     read_exr_channels,
     read_image,
     srgb_decode,

@@ -9,12 +9,12 @@ import pytest
 from chi2 import ChiSquareTest, SurfaceAdapter
 from conftest import z_bound
 
-from tracer.environment import HdriEnvironment, UniformEnvironment
-from tracer.lights import EMISSION, LightTable, make_emission
-from tracer.sampling import make_rng
+from tracer.core.sampling import make_rng
+from tracer.core.schema import parse_block
+from tracer.core.validate import FieldChecker
 from tracer.scene import Material, SceneObject
-from tracer.schema import parse_block
-from tracer.validate import FieldChecker
+from tracer.sources.environment import HdriEnvironment, UniformEnvironment
+from tracer.sources.lights import EMISSION, LightTable, make_emission
 
 #: Sidak family of the chi-square tests in this module.
 CHI2_TESTS = 5
@@ -131,7 +131,7 @@ def test_chi2_hdri_sampling_against_its_pdf(tmp_path):
     coordinates on a grid that refines its pixels (so no cell straddles a jump of the piecewise
     constant density), against the reported density per steradian times d omega / (du dv) =
     2 pi^2 cos(latitude); the sampler's own pdf equals pdf(d) and its radiance the lookup's."""
-    from tracer.environment import direction_to_equirect, equirect_to_direction
+    from tracer.sources.environment import direction_to_equirect, equirect_to_direction
 
     h, w = 32, 64
     rng = make_rng(7)
@@ -168,7 +168,7 @@ def test_hdri_next_event_estimate_of_the_mean_luminance():
     image = make_rng(9).random((16, 32, 3)).astype(np.float32)
     env = HdriEnvironment(image, "mean", 250.0)
     d, radiance, pdf = env.sample(make_rng(10).random((2, 400_000)))
-    from tracer.units import luminance3
+    from tracer.core.units import luminance3
 
     est = luminance3(radiance) / pdf
     assert abs(est.mean() - 4 * np.pi * 250.0) < z_bound(1) * est.std() / np.sqrt(len(est)) + 0.01 * 4 * np.pi * 250
@@ -200,4 +200,4 @@ def test_chi2_cosine_emission():
     adapter = SurfaceAdapter(CosineEmission(), (0.0, 0.0, -1.0), (0.3, -0.2, 1.0), mode="importance")
     ok, msg = adapter.test(seed=11).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.core.vec)

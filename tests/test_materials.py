@@ -7,16 +7,16 @@ import pytest
 from chi2 import SurfaceAdapter
 from conftest import z_bound
 
-from tracer.lights import EMISSION, make_emission
+from tracer.core.sampling import make_rng, uniform_sphere
+from tracer.core.schema import check_consistent, parse_block
+from tracer.core.validate import FieldChecker
+from tracer.core.vec import reflect
 from tracer.optics.aimed import Aimed, CosineEmission
 from tracer.optics.bsdf import DELTA, IMPORTANCE, RADIANCE, Interaction
 from tracer.optics.fresnel import fresnel_unpolarized, refract
 from tracer.optics.materials import MATERIALS
-from tracer.sampling import make_rng, uniform_sphere
 from tracer.scene import Material, SceneObject
-from tracer.schema import check_consistent, parse_block
-from tracer.validate import FieldChecker
-from tracer.vec import reflect
+from tracer.sources.lights import EMISSION, make_emission
 
 #: Sidak family of the chi-square tests in this module.
 CHI2_TESTS = 7
@@ -117,7 +117,7 @@ def test_coating_mirror_lcd_and_absorber():
 
 
 def test_lcd_transmittance_and_contrast(tmp_path):
-    from tracer.imageio import write_png
+    from tracer.core.imageio import write_png
 
     img = np.zeros((2, 2, 3), np.uint8)
     img[0, 0] = 255  # top-left clear
@@ -196,7 +196,7 @@ def test_chi2_every_non_delta_material(mtype, spec, d, bounds):
     kw = {"bounds": bounds} if bounds else {}
     ok, msg = adapter.test(seed=hash(mtype) % 1000, **kw).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.core.vec)
 
 
 def test_every_registered_non_delta_material_has_a_chi2_case():
@@ -207,7 +207,7 @@ def test_every_registered_non_delta_material_has_a_chi2_case():
 def test_chi2_aimed_mixture_at_a_surface_and_at_an_emitter():
     """The paper's directed split as a sampler: a Lambertian surface and a Lambertian emitter aiming
     40 % / 70 % of their samples at a disk off the normal; the mixture density is the pdf."""
-    from tracer.apertures import DiskTarget
+    from tracer.transport.apertures import DiskTarget
 
     target = DiskTarget(np.array([30.0, 10.0, 60.0]), np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0]),
                         12.0)
@@ -216,12 +216,12 @@ def test_chi2_aimed_mixture_at_a_surface_and_at_an_emitter():
     adapter = SurfaceAdapter(aimed, (0.2, -0.1, -1.0), (0.0, 0.0, 1.0), mode=IMPORTANCE)
     ok, msg = adapter.test(seed=41).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.core.vec)
     emitter = Aimed(CosineEmission(), {0: (target, 0.7, "toward")}, 1)
     adapter = SurfaceAdapter(emitter, (0.0, 0.0, -1.0), (0.0, 0.0, 1.0), mode=IMPORTANCE)
     ok, msg = adapter.test(seed=42).run(0.01, CHI2_TESTS)
     assert ok, msg
-    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.vec)
+    assert adapter.weight_mismatch < 1e-5  # float32 weights and densities (tracer.core.vec)
 
 
 def test_chi2_adapter_rejects_a_wrong_pdf():
@@ -245,7 +245,7 @@ def test_chi2_adapter_rejects_a_wrong_pdf():
 
 
 def test_emission_flux_and_luminance_agree():
-    from tracer.units import lambertian_flux_lm
+    from tracer.core.units import lambertian_flux_lm
 
     params = parse_block(FieldChecker("t"), {"flux": 1.0}, "emission", EMISSION.fields)
     e = make_emission(params, 4.0, None)  # 4 mm^2 panel, 1 lm

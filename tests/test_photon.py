@@ -10,12 +10,12 @@ import pytest
 from conftest import film_dof, t_bound, welch_dof
 
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle, sphere
-from tracer.integrators import INTEGRATORS, Budget
-from tracer.integrators.path import PROBE_KEY
-from tracer.integrators.photon import REPLICATES, PhotonGrid, radius_schedule
+from tracer.core.units import Y_WEIGHTS
+from tracer.methods import INTEGRATORS, Budget
+from tracer.methods.photon import REPLICATES, PhotonGrid, radius_schedule
 from tracer.scene import load_scene
-from tracer.units import Y_WEIGHTS
-from tracer.world import World
+from tracer.transport.path import PROBE_KEY
+from tracer.transport.world import World
 
 TAU = 0.5
 PANEL_L, PANEL_R, PANEL_H = 1000.0, 200.0, 30.0
@@ -272,7 +272,7 @@ def test_a_scene_of_glass_alone_is_not_blamed_on_max_depth(tmp_path):
 def test_batches_merge_exactly_across_processes(tmp_path):
     """Batches are independent replicates addressed by seed: two worker processes give the image of one
     process bit for bit."""
-    from tracer.parallel import render_parallel
+    from tracer.runtime.parallel import render_parallel
 
     folder = _screen(tmp_path / "s", slab=True)
     one = INTEGRATORS["photon"](load_scene(folder), 9).render(Budget(rays=1_500_000))

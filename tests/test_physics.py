@@ -12,7 +12,7 @@ from conftest import edit_json, film_dof, render, t_bound, z_bound
 
 import presets.analytic_disk as disk_preset
 from presets._build import SceneBuilder, frame_matrix, rectangle
-from tracer.imageio import write_png
+from tracer.core.imageio import write_png
 
 
 @pytest.mark.parametrize("pupil,acc,fov", [(2.0, 300.0, (60.0, 40.0)), (8.0, "infinity", (100.0, 20.0))])
@@ -61,8 +61,8 @@ def test_disk_illuminance_closed_form(preset):
     """E = pi L sin^2(alpha) at the foot of a Lambertian disk: the floor reads rho E / pi. With
     next-event estimation the error is 1e-4, so the expectation is the exact illuminance of the disk as
     built (a 256-gon: Lambert's contour formula) at the floor points the pixels see."""
-    from tracer.eye import ThinLensEye
     from tracer.scene import load_scene
+    from tracer.transport.eye import ThinLensEye
 
     folder = preset("analytic-disk", resolution=(3, 3))
     y, var, _ = render(folder, "backward", 3_000_000)
@@ -94,8 +94,8 @@ def _point_scene(folder, distance, accommodation):
 def test_thin_lens_focus_and_blur(tmp_path):
     """In focus: the image lies within one pixel of the centre. Out of focus: a uniform blur disk of
     diameter f D |1/d - 1/s| (perceived retina coordinates), i.e. RMS radius = diameter / (2 sqrt 2)."""
-    from tracer.eye import ThinLensEye
     from tracer.scene import load_scene
+    from tracer.transport.eye import ThinLensEye
 
     focused = _point_scene(tmp_path / "in", 500.0, 500.0)
     y, _, _ = render(focused, "forward", 600_000)
@@ -201,7 +201,7 @@ def test_eq3_stratification_moves_noise_not_answer(tmp_path):
 
 def test_hdri_environment_calibrated_to_a_mean(tmp_path, preset):
     """A panorama calibrated to a mean luminance renders that luminance where it is uniform."""
-    from tracer.imageio import write_exr
+    from tracer.core.imageio import write_exr
 
     folder = preset("analytic-furnace")
     img = np.full((16, 32), 3.0, np.float32)
@@ -216,13 +216,13 @@ def test_hdri_environment_calibrated_to_a_mean(tmp_path, preset):
 @pytest.mark.parametrize("luminance,expected", [(1.0, 5.12), (292.0, 2.61), (3000.0, 2.25), (21013.0, 2.12)])
 def test_pupil_from_adaptation_watson_yellott(luminance, expected):
     """The derived values of hud-physics.md (60 deg field, age 30, both eyes)."""
-    from tracer.pupil import pupil_diameter_mm
+    from tracer.optics.pupil import pupil_diameter_mm
 
     assert pupil_diameter_mm(luminance) == pytest.approx(expected, abs=0.006)
 
 
 def test_auto_pupil_follows_the_environment(preset):
-    from tracer.pupil import pupil_diameter_mm
+    from tracer.optics.pupil import pupil_diameter_mm
     from tracer.scene import load_scene
 
     folder = preset("analytic-furnace")

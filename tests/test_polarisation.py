@@ -18,16 +18,16 @@ from conftest import edit_json, film_dof, t_bound, z_bound
 
 from presets import PRESETS
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle
-from tracer.analysis import specular_paths
-from tracer.errors import SceneError
-from tracer.integrators import INTEGRATORS, Budget
+from tracer.core.errors import SceneError
+from tracer.core.units import Y_WEIGHTS
+from tracer.core.vec import F32
+from tracer.methods import INTEGRATORS, Budget
 from tracer.optics import materials, polar
 from tracer.optics.bsdf import DELTA, IMPORTANCE, RADIANCE, REFLECTION, TRANSMISSION, Interaction
 from tracer.optics.materials import Coating, Dielectric, Mirror
 from tracer.scene import SceneObject, load_scene
-from tracer.units import Y_WEIGHTS
-from tracer.vec import F32
-from tracer.world import World
+from tracer.transport.chains import specular_paths
+from tracer.transport.world import World
 
 N_GLASS = 1.52
 

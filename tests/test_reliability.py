@@ -24,8 +24,8 @@ import pytest
 from conftest import ROOT, edit_json, film_dof, render, t_bound
 
 from tracer import cli
-from tracer.imageio import read_exr_channels
-from tracer.integrators import INTEGRATORS, Budget
+from tracer.core.imageio import read_exr_channels
+from tracer.methods import INTEGRATORS, Budget
 from tracer.scene import load_scene
 
 OUTPUTS = ("image.exr", "preview.png", "report.json")
@@ -277,7 +277,7 @@ def test_9_the_memory_message_gives_the_limit_and_the_estimate(mirror):
 def test_11_the_brightest_allowed_source_renders_finite_outputs(mirror, tmp_path):
     """The luminance limit keeps every output finite: at the limit, Y_var (float32) and the report
     (JSON) still hold the values."""
-    from tracer.validate import MAX_LUMINANCE
+    from tracer.core.validate import MAX_LUMINANCE
 
     edit_json(mirror, _set(("objects", 2, "emission", "luminance"), MAX_LUMINANCE))
     out = tmp_path / "o"
@@ -335,22 +335,22 @@ def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_w
     the machine's are refused in one line naming --workers, the estimate and how many fit, before any
     process starts; workers beyond the CPUs render with a warning. Here on a machine of 1 GiB: 8
     workers of analytic-mirror at 16 x 12 pixels (about 128 MiB each) need 1.0 GiB."""
-    import tracer.validate
+    import tracer.core.validate
 
     out, before = earlier
-    monkeypatch.setattr(tracer.validate, "physical_memory_bytes", lambda: 1 << 30)
+    monkeypatch.setattr(tracer.core.validate, "physical_memory_bytes", lambda: 1 << 30)
     code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
     assert_one_line_error(code, err, "--workers", "8 processes need about 1.0 GiB", "16 x 12", "at most 3 here")
     assert hashes(out) == before
-    cpus = tracer.validate.available_cpus()
+    cpus = tracer.core.validate.available_cpus()
     assert cli.check_workers(cpus, (16, 12)) is None
     assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
     # The library refuses them too, before its pilot and any worker process.
-    from tracer.integrators import INTEGRATORS, Budget
-    from tracer.parallel import render_parallel
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
-    with pytest.raises(tracer.validate.WorkersError, match="at most 3 here"):
+    with pytest.raises(tracer.core.validate.WorkersError, match="at most 3 here"):
         render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=10**12), workers=8)
 
 
@@ -528,7 +528,8 @@ def test_the_max_depth_warning_is_a_lower_bound_where_the_probe_left_paths_going
     hand-built scene). The probe now counts the paths still going at its end, and then the warning
     says "at least" and why. Here a probe of two segments leaves a third of hud-direct's cut paths going
     (those in the windshield and toward the LCD), and it still finds most of the light they miss."""
-    from tracer.integrators import base, path
+    from tracer.methods import base
+    from tracer.transport import path
 
     monkeypatch.setattr(path, "PROBE_DEPTH", 2)
     monkeypatch.setattr(base, "PROBE_DEPTH", 2)
@@ -740,9 +741,9 @@ def test_a_stop_before_the_first_batch_keeps_the_earlier_set(mirror, earlier):
     warning blamed the scene ("none reached a source"). A render stopped before its first batch has
     nothing to write: the folder keeps its set, and the command says so with status 130. A sweep
     stopped so ends with the runs before it."""
-    from tracer.errors import StoppedBeforeFirstBatch
-    from tracer.render import render_scene
-    from tracer.sweep import open_outputs
+    from tracer.core.errors import StoppedBeforeFirstBatch
+    from tracer.products.render import render_scene
+    from tracer.scans.sweep import open_outputs
 
     out, before = earlier
     with pytest.raises(StoppedBeforeFirstBatch):
@@ -759,7 +760,7 @@ def test_an_emitter_forward_tracing_leaves_without_particles_is_named(tmp_path):
     preset is warned (their emitters share the flux evenly)."""
     from presets import PRESETS
     from presets._build import SceneBuilder, frame_matrix, rectangle
-    from tracer.world import World
+    from tracer.transport.world import World
 
     sb = SceneBuilder(tmp_path / "s", "range", "1e12 next to 1e-6 cd/m^2")
     for name, x, lum in (("bright", -10.0, 1e12), ("dim", 10.0, 1e-6)):

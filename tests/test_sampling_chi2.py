@@ -1,4 +1,4 @@
-"""Chi-square tests of every warp in :mod:`tracer.sampling`, plus exact checks.
+"""Chi-square tests of every warp in :mod:`tracer.core.sampling`, plus exact checks.
 
 Each chi^2 test maps the samples to 2D coordinates in which the density is smooth over the
 whole domain rectangle, so that Gauss-Legendre quadrature gives accurate expected counts (a
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from chi2 import ChiSquareTest, gamma_q  # tests/chi2.py; pytest puts tests/ on sys.path
 
-from tracer import sampling as smp
+from tracer.core import sampling as smp
 
 SAMPLES = 1_000_000
 SIGNIFICANCE = 0.01
@@ -326,7 +326,7 @@ def test_uniform_disk_concentric_edges():
     u = np.array([[0.5, 0.5], [0.0, 0.0], [0.0, 0.5], [0.5, 0.0]]).T
     p = smp.uniform_disk_concentric(u).T
     np.testing.assert_array_equal(p[0], [0.0, 0.0])
-    # The warp's angles are float32 (tracer.sampling): radii of 1 to float32 precision.
+    # The warp's angles are float32 (tracer.core.sampling): radii of 1 to float32 precision.
     np.testing.assert_allclose(np.linalg.norm(p[1:], axis=-1), 1.0, rtol=1e-7)
     p = smp.uniform_disk_concentric(smp.make_rng(0).random((2, 10_000)))
     assert np.all(np.linalg.norm(p, axis=0) <= 1.0 + 1e-7)

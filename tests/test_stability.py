@@ -8,10 +8,10 @@ import pytest
 from conftest import edit_json, render
 
 from presets._build import SceneBuilder, box, frame_matrix, rectangle
-from tracer.errors import SceneError
-from tracer.imageio import write_exr
-from tracer.integrators import Budget
-from tracer.render import render_folder
+from tracer.core.errors import SceneError
+from tracer.core.imageio import write_exr
+from tracer.methods import Budget
+from tracer.products.render import render_folder
 from tracer.scene import load_scene
 
 
@@ -81,8 +81,8 @@ def test_the_pixel_extent_holds_for_the_smallest_pupil_and_the_farthest_focus():
     focus at 1e10 mm): the backward estimate divided by it and was NaN. At focus 1e12 mm (the largest
     allowed) the extent must equal the closed form at infinity, A cos^4 / f^2 integrated over the pixel,
     for the smallest pupil allowed (0.01 mm) and the largest (20 mm)."""
-    from tracer.eye import ThinLensEye
     from tracer.scene import EyeSpec
+    from tracer.transport.eye import ThinLensEye
 
     for pupil in (0.01, 4.0, 20.0):
         spec = dict(position=np.zeros(3), gaze=np.array([0.0, 1, 0]), up=np.array([0.0, 0, 1]),

@@ -1,4 +1,4 @@
-"""The sun of an environment (tracer.environment.Sun, EnvironmentWithSun): its sampling against its
+"""The sun of an environment (tracer.sources.environment.Sun, EnvironmentWithSun): its sampling against its
 density by chi-square (the sun a small part of the power, and nearly all of it), the mixture's
 estimate of the power, and renders against closed forms: a Lambertian floor lit by the sun reads
 rho E sin(h) / pi (0 with the sun below its horizon), and a sun in direct view shows its luminance
@@ -12,7 +12,9 @@ from chi2 import ChiSquareTest
 from conftest import film_dof, render, t_bound, z_bound
 
 from presets._build import SceneBuilder, rectangle
-from tracer.environment import (
+from tracer.core.sampling import make_rng
+from tracer.core.units import luminance3
+from tracer.sources.environment import (
     EnvironmentWithSun,
     HdriEnvironment,
     NoEnvironment,
@@ -21,8 +23,6 @@ from tracer.environment import (
     direction_to_equirect,
     equirect_to_direction,
 )
-from tracer.sampling import make_rng
-from tracer.units import luminance3
 
 #: Sidak family of the chi-square tests in this module.
 CHI2_TESTS = 5
@@ -217,10 +217,10 @@ def test_a_sun_in_direct_view_shows_its_luminance_and_delivers_its_illuminance(t
     """An eye looking at the sun through nothing (1 deg field, 40 x 40 pixels, focused at infinity): every
     pixel wholly inside the disk reads L = E / (pi sin^2 delta) (1.49e9 cd/m^2 for 100,000 lx at 0.53 deg),
     every pixel wholly outside it 0; and the image delivers the sun's illuminance to the pupil: the sum of
-    Y G_pix over the pixels, over the pupil's area, is E (tracer.eye: the flux of a pixel is its luminance
+    Y G_pix over the pixels, over the pupil's area, is E (tracer.transport.eye: the flux of a pixel is its luminance
     times its extent G_pix)."""
-    from tracer.eye import ThinLensEye
     from tracer.scene import load_scene
+    from tracer.transport.eye import ThinLensEye
 
     direction = np.array(_sun_direction(40.0, 20.0))
     sb = SceneBuilder(tmp_path / "sky", "sun in view", "the sun seen through nothing")

@@ -1,4 +1,4 @@
-"""Parameter sweeps (tracer.sweep, ``hud-trace sweep``): an emitter's luminance swept on analytic-mirror
+"""Parameter sweeps (tracer.scans.sweep, ``hud-trace sweep``): an emitter's luminance swept on analytic-mirror
 against the closed form L R (per run, and the recommended interval at a threshold), a requirement no
 run meets, a two-field grid, the CSV round trip, the chart's threshold lines and shading found in its
 pixels, Ctrl-C, a failed write, and every refusal before any ray."""
@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from conftest import edit_json, t_bound, z_bound
 
-import tracer.sweep as sweep_module
+import tracer.scans.sweep as sweep_module
 from presets import analytic_mirror
 from tracer import cli
-from tracer.imageio import read_image
-from tracer.integrators import INTEGRATORS, Budget
-from tracer.render import REPORT_SECTIONS, render_folder
-from tracer.sweep import (
+from tracer.core.imageio import read_image
+from tracer.methods import INTEGRATORS, Budget
+from tracer.products.render import REPORT_SECTIONS, render_folder
+from tracer.scans.sweep import (
     MAX_RUNS,
     SHADE,
     THRESHOLD,

@@ -1,4 +1,4 @@
-"""Tests of tracer.tonemap: log-average luminance, Ward's scale factor, the 8-bit preview."""
+"""Tests of tracer.products.tonemap: log-average luminance, Ward's scale factor, the 8-bit preview."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from tracer.imageio import srgb_decode
-from tracer.tonemap import log_average_luminance, tonemap_ward, ward_scale_factor
-from tracer.units import luminance
+from tracer.core.imageio import srgb_decode
+from tracer.core.units import luminance
+from tracer.products.tonemap import log_average_luminance, tonemap_ward, ward_scale_factor
 
 
 def _grey(Y) -> np.ndarray:

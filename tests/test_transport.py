@@ -10,11 +10,11 @@ from conftest import edit_json, film_dof, t_bound, welch_dof, z_bound
 
 from presets import PRESETS, SINGLE_METHOD
 from presets._build import SceneBuilder, annulus, box, frame_matrix, rectangle
-from tracer.imageio import write_png
-from tracer.integrators import INTEGRATORS, Budget
+from tracer.core.imageio import write_png
+from tracer.core.units import Y_WEIGHTS
+from tracer.methods import INTEGRATORS, Budget
 from tracer.scene import load_scene
-from tracer.units import Y_WEIGHTS
-from tracer.world import World
+from tracer.transport.world import World
 
 #: The method variants every preset must agree on.
 VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
@@ -168,7 +168,7 @@ def test_photon_and_forward_agree_on_screen_presets(tmp_path, name):
 def test_nee_report_gives_the_share_of_connections(tmp_path):
     """On hud-direct the symbols are the scatterer lit by the LEDs: almost all of the estimate comes
     through connections, and the report's components add up to the image."""
-    from tracer.render import render_folder
+    from tracer.products.render import render_folder
 
     report, res = render_folder(PRESETS["hud-direct"].write(tmp_path / "s"), "backward", Budget(rays=1_500_000), 3,
                                 tmp_path / "out", analyse=False)
@@ -356,7 +356,7 @@ def _tilted_plate(folder):
 
 
 @pytest.mark.parametrize("method, module, constant", [
-    ("backward", "tracer.integrators.backward", "SAMPLE_UNSPLIT_ONLY"),
+    ("backward", "tracer.methods.backward", "SAMPLE_UNSPLIT_ONLY"),
     ("forward", "tracer.optics.aimed", "EVAL_EVERY_RAY")])
 def test_speed_shortcuts_leave_the_image_as_it_was(tmp_path, monkeypatch, method, module, constant):
     """The shortcuts of the path loop compute the same numbers by another route: sampling only the
@@ -380,9 +380,9 @@ def test_speed_shortcuts_leave_the_image_as_it_was(tmp_path, monkeypatch, method
 
 
 def test_take_and_put_match_numpy_indexing():
-    """tracer.vec.take and put give what fancy indexing along the last axis gives, for the tracer's
+    """tracer.core.vec.take and put give what fancy indexing along the last axis gives, for the tracer's
     indices (in range, -1 for the appended miss column), on planes of 1 to 3 dimensions."""
-    from tracer.vec import put, take
+    from tracer.core.vec import put, take
 
     rng = np.random.default_rng(3)
     for shape in ((7,), (3, 7), (3, 2, 7)):
@@ -402,12 +402,12 @@ def test_take_and_put_match_numpy_indexing():
 
 def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path):
     """A forward batch lights a few thousand of hud-direct's 65,520 pixels: its film travels as those
-    columns (tracer.film.Columns), and merging it gives every array of the dense merge, bit for bit
+    columns (tracer.core.film.Columns), and merging it gives every array of the dense merge, bit for bit
     (sums, per-component and per-group replicate sums and squares). A backward batch's connections
     light most pixels and travel whole; its paths that hit an LED, a few hundred, as columns."""
     import pickle
 
-    from tracer.film import SPARSE_SHARE, Columns
+    from tracer.core.film import SPARSE_SHARE, Columns
 
     world = World(load_scene(PRESETS["hud-direct"].write(tmp_path / "s")))
 

@@ -14,7 +14,7 @@ import OpenImageIO as oiio
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tracer.imageio import write_png  # noqa: E402
+from tracer.core.imageio import write_png  # noqa: E402
 
 
 def main():

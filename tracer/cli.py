@@ -12,18 +12,18 @@ Exit status of ``render`` (each states what is on disk afterwards):
 - 130: interrupted (Ctrl-C, SIGTERM or SIGHUP): the batches merged so far are written as a set,
   marked ``"partial": true``.
 
-``readouts`` prints the figures of a render's report.json (tracer.hudfigures.readouts, what the Blender
+``readouts`` prints the figures of a render's report.json (tracer.analysis.hud.readouts, what the Blender
 add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one line).
 
-``false-colour`` writes the false-colour view of an image.exr (tracer.falsecolour) to one PNG file:
+``false-colour`` writes the false-colour view of an image.exr (tracer.products.falsecolour) to one PNG file:
 0 written, 2 bad input (nothing written), 4 the file could not be written (it keeps what it held).
 
-``eyebox`` writes eyebox.csv, eyebox.png and eyebox.json (tracer.eyebox) into a folder as one set: 0
+``eyebox`` writes eyebox.csv, eyebox.png and eyebox.json (tracer.scans.eyebox) into a folder as one set: 0
 written; 2 bad input, before the scan (nothing written); 3 written, but the analysis cannot predict
 the scene (eyebox.json's ``valid`` is false and stderr says why); 4 the outputs could not be written
 (the folder keeps its earlier ones); 5 aborted by Ctrl-C (nothing written).
 
-``sweep`` renders a scene over a grid of scene.json values (tracer.sweep) into a folder: runs/<k>/ and
+``sweep`` renders a scene over a grid of scene.json values (tracer.scans.sweep) into a folder: runs/<k>/ and
 sweep.csv, sweep.json and sweep.png, as one set: 0 written; 2 bad input, before any ray (nothing
 written); 3 written, but no run meets the requirements (``--require``); 4 the outputs could not be
 written (the folder keeps its earlier sweep); 130 stopped by Ctrl-C, SIGTERM or SIGHUP: the current
@@ -44,7 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from .errors import EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
+from .core.errors import EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
 
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Signals that stop a render the way Ctrl-C does (batch schedulers send SIGTERM, a closed terminal SIGHUP).
@@ -91,7 +91,7 @@ class StopFlag:
         return self.stop
 
     def handler(self, signum, frame):
-        from .outputs import writing
+        from .products.outputs import writing
 
         name = signal.Signals(signum).name
         if self.stop and writing():
@@ -109,7 +109,7 @@ class ArgumentError(Exception):
 
 def check_render_args(args):
     """Every render argument in its range, before anything is loaded or traced."""
-    from .integrators.base import MAX_BATCH, SMALLEST_BATCH
+    from .methods.base import MAX_BATCH, SMALLEST_BATCH
 
     def bad(flag, msg):
         raise ArgumentError(f"{flag}: {msg}")
@@ -127,9 +127,9 @@ def check_render_args(args):
 
 
 def check_workers(workers: int, resolution: tuple[int, int]) -> str | None:
-    """:func:`tracer.validate.check_workers`, its refusal as an :class:`ArgumentError` of --workers."""
-    from .validate import WorkersError
-    from .validate import check_workers as check
+    """:func:`tracer.core.validate.check_workers`, its refusal as an :class:`ArgumentError` of --workers."""
+    from .core.validate import WorkersError
+    from .core.validate import check_workers as check
 
     try:
         return check(workers, resolution)
@@ -156,7 +156,7 @@ def _write_errors(e: BaseException, out) -> int:
     the errors it ends with: the folder cannot take the set, or a value overflows (2); the writing
     failed (4: the folder keeps its earlier set); a second Ctrl-C (5); other I/O, such as a preset's
     temporary scene folder on a full disk (4)."""
-    from .outputs import OutputFolderError
+    from .products.outputs import OutputFolderError
 
     if isinstance(e, OutputFolderError | EstimateOverflowError):
         print(f"error: {e}", file=sys.stderr)
@@ -173,10 +173,10 @@ WRITE_ERRORS = (KeyboardInterrupt, OSError, EstimateOverflowError)
 
 
 def cmd_render(args) -> int:
-    from .allocator import keep_freed_memory
-    from .integrators import Budget
-    from .outputs import OutputError
-    from .render import render_scene
+    from .methods import Budget
+    from .products.outputs import OutputError
+    from .products.render import render_scene
+    from .runtime.allocator import keep_freed_memory
     from .scene import load_scene
 
     try:
@@ -240,7 +240,7 @@ def cmd_export(args) -> int:
     left behind either way)."""
     from presets import PRESETS
 
-    from .outputs import replace_folder
+    from .products.outputs import replace_folder
 
     if args.preset not in PRESETS:
         raise SceneError(args.preset, "", f"unknown preset (presets: {', '.join(PRESETS)})")
@@ -271,7 +271,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_methods(args) -> int:
-    from .integrators import INTEGRATORS
+    from .methods import INTEGRATORS
 
     for name, cls in INTEGRATORS.items():
         print(f"{name:10s} {cls.summary}")
@@ -281,7 +281,7 @@ def cmd_methods(args) -> int:
 def cmd_readouts(args) -> int:
     import json
 
-    from .hudfigures import readouts
+    from .analysis.hud import readouts
 
     path = Path(args.report)
     if path.is_dir():
@@ -320,9 +320,9 @@ def check_false_colour_args(args):
 
 
 def cmd_false_colour(args) -> int:
-    from .errors import ImageReadError
-    from .falsecolour import luminance_range, read_luminance, save_false_colour
-    from .outputs import OutputFolderError, OutputWriteError
+    from .core.errors import ImageReadError
+    from .products.falsecolour import luminance_range, read_luminance, save_false_colour
+    from .products.outputs import OutputFolderError, OutputWriteError
 
     try:
         check_false_colour_args(args)
@@ -353,11 +353,11 @@ EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field"
 
 
 def cmd_eyebox(args) -> int:
-    from .allocator import keep_freed_memory
-    from .eyebox import OUTPUT_NAMES, FieldNotFound, ScanArgumentError, check_scan, eyebox_scan, output_files
-    from .outputs import OutputError, OutputSet
+    from .products.outputs import OutputError, OutputSet
+    from .runtime.allocator import keep_freed_memory
+    from .scans.eyebox import OUTPUT_NAMES, FieldNotFound, ScanArgumentError, check_scan, eyebox_scan, output_files
     from .scene import load_scene
-    from .world import World
+    from .transport.world import World
 
     try:
         check_scan(args.half, args.step, args.field, args.threshold)
@@ -406,10 +406,10 @@ SHOW_CHECKS_AFTER_S = 2.0
 
 
 def cmd_sweep(args) -> int:
-    from .allocator import keep_freed_memory
-    from .integrators import Budget
-    from .outputs import OutputError
-    from .sweep import SweepArgumentError, check_arguments, open_outputs, plan_sweep, run_sweep
+    from .methods import Budget
+    from .products.outputs import OutputError
+    from .runtime.allocator import keep_freed_memory
+    from .scans.sweep import SweepArgumentError, check_arguments, open_outputs, plan_sweep, run_sweep
 
     try:
         check_render_args(args)
@@ -519,8 +519,8 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .integrators import DEFAULT_METHOD, INTEGRATORS
-    from .validate import available_cpus
+    from .core.validate import available_cpus
+    from .methods import DEFAULT_METHOD, INTEGRATORS
 
     ap = Parser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -628,7 +628,8 @@ def _import_holding_interrupts() -> bool:
     try:
         import presets  # noqa: F401
 
-        from . import eyebox, falsecolour, render, sweep  # noqa: F401
+        from .products import falsecolour, render  # noqa: F401
+        from .scans import eyebox, sweep  # noqa: F401
     finally:
         signal.signal(signal.SIGINT, previous)
     return bool(came)

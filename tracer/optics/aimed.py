@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sampling import cosine_hemisphere, frame_from_normal, to_world
-from ..vec import F32, dot, put, take
+from ..core.sampling import cosine_hemisphere, frame_from_normal, to_world
+from ..core.vec import F32, dot, put, take
 from .bsdf import DELTA, REFLECTION, BSDFSample, Interaction
 
 #: When at least this share of the rays is aimed, :meth:`Aimed.sample` evaluates the own law at every
@@ -58,7 +58,7 @@ class Aimed:
     Parameters
     ----------
     own : the sampler of the surface's own law.
-    aims : {object slot: (target, share, mode)} with target an aperture of tracer.apertures (a
+    aims : {object slot: (target, share, mode)} with target an aperture of tracer.transport.apertures (a
         DiskTarget or MeshTarget), share in [0, 1), mode "toward" or "away". Objects without an entry
         sample their own law only.
     slots : number of object slots in the world.

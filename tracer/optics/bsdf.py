@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..vec import F32, dot, take
+from ..core.vec import F32, dot, take
 from .polar import DEPOLARISE, Mueller
 
 #: Transport modes.
@@ -58,7 +58,7 @@ class Interaction:
     ng : unit geometric normals (mesh winding; float32). ns : unit shading normals (interpolated, on
     the side of ng; float32). uv : (2, n) float32 texture coordinates or None. slot : (n,) the
     objects' slots in the world.
-    offset : (n,) the faces' spawn offsets (mm; tracer.accel), or None.
+    offset : (n,) the faces' spawn offsets (mm; tracer.transport.accel), or None.
     cache : per-interaction values a material computes once (its local frames).
     polar : in a polarised world, the arriving paths' state (stokes (3, C, n), frame (3, n); see
         tracer.optics.polar), so that a material with two delta branches can choose between them by
@@ -128,7 +128,7 @@ class BSDFSample:
 
 
 class BSDF:
-    """Base of every material. Subclasses set ``schema`` (tracer.schema.Schema), ``flags`` (the union of
+    """Base of every material. Subclasses set ``schema`` (tracer.core.schema.Schema), ``flags`` (the union of
     their lobes' flags; 0 for a black absorber), ``dims`` (random numbers per sample) and implement
     the methods of the module docstring."""
 

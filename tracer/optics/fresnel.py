@@ -4,14 +4,14 @@ Fresnel equations: the s and p amplitudes (what polarised transport uses, tracer
 for unpolarised light R = (R_s + R_p) / 2 with
 r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), r_p = (n2 cos_i - n1 cos_t) / (n2 cos_i + n1 cos_t)
 (Born & Wolf, Principles of Optics, 7th ed., sec. 1.5.2, doi:10.1017/CBO9781139644181).
-Vectors are (3, n) planes (:mod:`tracer.vec`).
+Vectors are (3, n) planes (:mod:`tracer.core.vec`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..vec import normalize, reflect  # noqa: F401  (reflect is part of this module's interface)
+from ..core.vec import normalize, reflect  # noqa: F401  (reflect is part of this module's interface)
 
 
 def fresnel_amplitudes(cos_i: np.ndarray, eta: np.ndarray | float):

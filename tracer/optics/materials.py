@@ -1,7 +1,7 @@
 """The materials: one class each, carrying its schema (the fields of scene.json's "material" block).
 
 Adding a material: write a class here that derives from :class:`tracer.optics.bsdf.BSDF`, give it a
-``schema`` (tracer.schema) and the interface methods, and decorate it with :func:`material`. The
+``schema`` (tracer.core.schema) and the interface methods, and decorate it with :func:`material`. The
 loader's validation, the Blender add-on's properties, panel and export, the preset builder and the
 Mitsuba converter's check all follow from the schema; tests/test_materials.py runs the chi-square
 adapter on every non-delta material and the energy and reciprocity checks on all of them.
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sampling import cosine_hemisphere, frame_from_normal, gaussian_lobe, gaussian_lobe_pdf, to_local, to_world
-from ..schema import REQUIRED, Field, Schema
-from ..units import luminance3
-from ..vec import F32, dot, reflect, take
+from ..core.sampling import cosine_hemisphere, frame_from_normal, gaussian_lobe, gaussian_lobe_pdf, to_local, to_world
+from ..core.schema import REQUIRED, Field, Schema
+from ..core.units import luminance3
+from ..core.vec import F32, dot, reflect, take
 from .bsdf import BSDF, DELTA, RADIANCE, REFLECTION, TRANSMISSION, BSDFSample, Interaction
 from .fresnel import fresnel_amplitudes, refract, unpolarized_from_amplitudes
 from .polar import POLARISE, SP, Mueller, amplitudes, axis_frame, s_frame, sp_from_amplitudes, sp_from_powers, state_s1

@@ -50,8 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling import frame_from_normal
-from ..vec import F32, cross, dot, take
+from ..core.sampling import frame_from_normal
+from ..core.vec import F32, cross, dot, take
 
 #: Kinds of :class:`Mueller`.
 SP, POLARISE, DEPOLARISE = "sp", "polarise", "depolarise"
@@ -210,7 +210,7 @@ class Transport:
     """
 
     def __init__(self, world):
-        """``world``: the render world (its materials, scene objects and eye, tracer.eye.ThinLensEye)."""
+        """``world``: the render world (its materials, scene objects and eye, tracer.transport.eye.ThinLensEye)."""
         self.world = world
         #: Channels of the normalised state: 1 where every Mueller matrix is achromatic, else 3.
         self.channels = 3 if any(m.chromatic_polarisation for m in world.materials) else 1

@@ -1,0 +1,242 @@
+"""The figures an HUD engineer reads off an image: symbol luminance, the background behind the symbols,
+the rear-projection spot, and the contrast ratio (paper sec. 4.1: the spot "seriously worsens the
+conditions for observing the real environment"; the LED luminance is chosen for "the minimum possible
+contrast" of the spot and the "maximum contrast" of the symbols).
+
+The display region is where the eye's chief rays reach the display through its specular optics (the
+dominant chain of :func:`tracer.transport.chains.specular_paths`: through the LCD, or ending on the screen),
+eroded by one analysis cell. Inside it, the symbols are the pixels above SYMBOL_SHARE of the display's
+99th percentile (an LCD's clear and black cells differ by its contrast ratio); among the rest, the
+most populous mode of the log luminance is the black leak, and darker modes a decade or more below
+it (a screen's margin that the LCD's image does not reach) are left out as unlit (modes by Otsu's
+threshold for three classes, classes whose means lie within a decade merged; Otsu 1979,
+doi:10.1109/TSMC.1979.4310076). The split does not depend on the method, so every method
+is judged on one table.
+
+- ``symbol_cd_m2``, ``background_cd_m2``: means over the symbol pixels eroded by one pixel and the
+  background pixels eroded by BACKGROUND_EROSION (edges blurred by the pupil and the photon gather
+  are left out);
+- ``contrast_ratio``: CR = (L_sym + L_bg) / L_bg (the paper's and ISO 15008's form);
+- ``spot``: the background smoothed over a window of ``SPOT_WINDOW`` of the display's width (a
+  normalised box filter over background pixels only): its peak (cd/m^2), the peak over the
+  background's median, and its size: the solid angle where the smoothed background exceeds half its
+  peak, as the diameter (deg) of a disk of equal solid angle.
+
+Against a real environment (the hybrid method's channels: the HUD's light and the environment's, each
+an image of its own), symbols and background are told apart on the HUD channel, and the environment
+channel gives what lies behind them:
+
+- ``environment_behind_symbols_cd_m2``: the environment's luminance over the symbol pixels (seen through
+  the windshield and the combiner);
+- ``background_behind_symbols_cd_m2`` = that + the HUD's own background (its black leak), and
+  ``contrast_ratio`` = (L_sym + L_b) / L_b with that L_b: the symbols' contrast against what the eye
+  sees behind them (``hud_contrast_ratio``: the HUD alone, as in the dark);
+- ``spot.environment_cd_m2``: the environment smoothed as the spot, at the spot's peak, and
+  ``spot.contrast_against_environment`` = (L_env + L_spot) / L_env: how the HUD's brightest background
+  region stands out against the environment behind it (1: invisible).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..transport.chains import specular_paths
+
+#: Window of the spot's smoothing, as a share of the display's width in pixels.
+SPOT_WINDOW = 0.08
+#: Symbols are the pixels above this share of the display's 99th percentile of luminance: an LCD's
+#: clear cells vary less than tenfold across a display, its black cells lie tenfold (CR >= 10) below.
+SYMBOL_SHARE = 0.1
+#: Pixels of erosion of the background (from the symbols' edges and the display's).
+BACKGROUND_EROSION = 3
+#: Log-luminance histogram bins for Otsu's threshold.
+BINS = 256
+
+
+def erode(mask: np.ndarray, border_inside: bool = False) -> np.ndarray:
+    """Binary erosion of a 2D mask with the 3 x 3 cross; the image border counts as outside the mask,
+    or (``border_inside``) as continuing it (a display that fills the view keeps its edge pixels)."""
+    m = np.pad(mask, 1, mode="edge") if border_inside else np.pad(mask, 1, constant_values=False)
+    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
+
+
+def log_modes(logv: np.ndarray) -> list[float]:
+    """Thresholds (log10 cd/m^2) between the modes of log luminances ``logv``: the three-class Otsu
+    split (exhaustive over the histogram's pairs of bins), with neighbouring classes whose means lie
+    within a decade merged; [] for one mode, [t] for two, [t_low, t_high] for three."""
+    hist, edges = np.histogram(logv, BINS)
+    p = hist / max(hist.sum(), 1)
+    c = 0.5 * (edges[1:] + edges[:-1])
+    w = np.concatenate([[0.0], np.cumsum(p)])
+    m = np.concatenate([[0.0], np.cumsum(p * c)])
+    i, j = np.triu_indices(BINS + 1, 1)
+    keep = (i > 0) & (j < BINS)
+    i, j = i[keep], j[keep]
+    w0, w1, w2 = w[i], w[j] - w[i], 1 - w[j]
+    m0, m1, m2 = m[i], m[j] - m[i], m[-1] - m[j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = np.where((w0 > 0) & (w1 > 0) & (w2 > 0), m0 * m0 / w0 + m1 * m1 / w1 + m2 * m2 / w2, -np.inf)
+    k = int(np.argmax(score))
+    cuts = [float(edges[i[k]]), float(edges[j[k]])]
+    while cuts:
+        bounds = [-np.inf, *cuts, np.inf]
+        means = [logv[(logv >= a) & (logv < b)].mean() for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        gaps = np.diff(means)
+        if gaps.min() >= 1.0:
+            break
+        cuts.pop(int(np.argmin(gaps)))
+    return cuts
+
+
+def _box_mean(values: np.ndarray, weights: np.ndarray, k: int) -> np.ndarray:
+    """Normalised box filter of half-width k: sum(values w) / sum(w) over each (2k+1)^2 window."""
+    def box(a):
+        c = np.cumsum(np.cumsum(np.pad(a, ((k + 1, k), (k + 1, k))), axis=0), axis=1)
+        n = 2 * k + 1
+        return c[n:, n:] - c[:-n, n:] - c[n:, :-n] + c[:-n, :-n]
+    num, den = box(values * weights), box(weights)
+    return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+
+
+def display_mask(world) -> np.ndarray | None:
+    """(H, W) bool: pixels whose chief ray reaches the display along the dominant specular chain (the
+    one through the LCD, else the brightest), eroded by one analysis cell; None where no chain does."""
+    res = specular_paths(world, environment=False)
+    paths = res["paths"]
+    if not paths:
+        return None
+    through_lcd = [p for p in paths if np.any(np.isfinite(p["lcd"]))]
+    main = (through_lcd or paths)[0]
+    gh, gw = res["grid"]
+    grid = np.zeros(gh * gw, bool)
+    grid[main["pixel"]] = True
+    grid = erode(grid.reshape(gh, gw), border_inside=True)
+    s = res["stride"]
+    eye = world.eye
+    full = np.kron(grid, np.ones((s, s), bool))
+    out = np.zeros((eye.height, eye.width), bool)
+    # grid cell (j, i) is centred on pixel (j s + s // 2, i s + s // 2): cells span [j s, j s + s)
+    h, w = min(full.shape[0], eye.height), min(full.shape[1], eye.width)
+    out[:h, :w] = full[:h, :w]
+    return out
+
+
+def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> dict | None:
+    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye (with
+    ``environment``, ``y`` is the HUD channel alone and ``environment`` the environment channel's image);
+    None where the eye sees no display."""
+    mask = display_mask(world)
+    if mask is None or mask.sum() < 16:
+        return None
+    eye = world.eye
+    vals = y[mask]
+    pos = vals[vals > 0]
+    out: dict = {"display_pixels": int(mask.sum())}
+    if len(pos) < 16:
+        out["note"] = "the display region is dark"
+        return out
+    top = float(np.percentile(pos, 99))
+    if np.percentile(pos, 5) > SYMBOL_SHARE * top:  # no dark cells: one mode, nothing to tell apart
+        out["note"] = "the display is uniform (no symbols and background to tell apart)"
+        out["display_cd_m2"] = float(vals.mean())
+        return out
+    t = SYMBOL_SHARE * top
+    sym = mask & (y >= t)
+    bg = mask & (y < t)
+    dark = np.log10(y[bg & (y > 0)])
+    cuts = log_modes(dark) if len(dark) >= 32 else []
+    if cuts:  # the most populous mode is the black leak; modes below it are unlit
+        counts = np.bincount(np.searchsorted(cuts, dark, side="right"), minlength=len(cuts) + 1)
+        main = int(np.argmax(counts))
+        if main > 0:
+            unlit = bg & (y < 10 ** cuts[main - 1])
+            out["unlit_pixels"] = int(unlit.sum())
+            bg &= ~unlit
+    # Symbols eroded by one pixel; the background by BACKGROUND_EROSION, away from the halo that the
+    # pupil's blur and a photon gather's radius spread around every symbol.
+    sym_in, bg_in = erode(sym, border_inside=True), bg
+    for _ in range(BACKGROUND_EROSION):
+        bg_in = erode(bg_in, border_inside=True)
+    l_sym = float(y[sym_in].mean()) if sym_in.any() else float(y[sym].mean())
+    l_bg = float(y[bg_in].mean()) if bg_in.any() else (float(y[bg].mean()) if bg.any() else 0.0)
+    out |= {"symbol_threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
+            "symbol_cd_m2": l_sym, "background_cd_m2": l_bg,
+            "contrast_ratio": (l_sym + l_bg) / l_bg if l_bg > 0 else None}
+    if environment is not None:
+        behind = float(environment[sym_in].mean()) if sym_in.any() else float(environment[sym].mean())
+        l_b = behind + l_bg
+        out |= {"environment_behind_symbols_cd_m2": behind, "background_behind_symbols_cd_m2": l_b,
+                "hud_contrast_ratio": out["contrast_ratio"],
+                "contrast_ratio": (l_sym + l_b) / l_b if l_b > 0 else None}
+    if bg_in.sum() >= 16 and l_bg > 0:
+        bg = bg_in
+        cols = np.flatnonzero(mask.any(axis=0))
+        k = max(1, int(round(SPOT_WINDOW * (cols[-1] - cols[0] + 1) / 2)))
+        smooth = _box_mean(np.where(bg, y, 0.0), bg.astype(np.float64), k)
+        smooth = np.where(bg, smooth, 0.0)
+        peak = float(smooth.max())
+        at = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
+        half = bg & (smooth >= 0.5 * peak)
+        px_sr = (2 * eye.half_x / eye.focal / eye.width) * (2 * eye.half_y / eye.focal / eye.height)
+        diameter = 2 * math.degrees(math.sqrt(half.sum() * px_sr / math.pi))
+        median = float(np.median(y[bg]))
+        out["spot"] = {"peak_cd_m2": peak, "peak_pixel": [int(at[1]), int(at[0])],
+                       "peak_over_median_background": peak / median if median > 0 else None,
+                       "peak_over_symbol": peak / l_sym if l_sym > 0 else None,
+                       "half_peak_diameter_deg": diameter, "smoothing_px": 2 * k + 1}
+        if environment is not None:
+            env = float(_box_mean(np.where(bg, environment, 0.0), bg.astype(np.float64), k)[at])
+            out["spot"] |= {"environment_cd_m2": env,
+                            "contrast_against_environment": (env + peak) / env if env > 0 else None}
+    return out
+
+
+def readouts(report: dict) -> list[tuple[str, str]]:
+    """The figures of a render's report (tracer.products.render.build_report) as (label, text) rows, for a panel
+    or a summary line: the HUD figures (symbols, background, contrast, the rear-projection spot), the
+    windshield's ghost (from the brightness-theorem analysis), the luminance the eye adapts to, and how
+    well the render converged (noise, efficiency, rays). Rows whose figures the report lacks (a
+    stopped render skips the analysis) are left out."""
+    rows: list[tuple[str, str]] = []
+    hud = report.get("hud") or {}
+    if "symbol_cd_m2" in hud:
+        rows.append(("Symbols", f"{hud['symbol_cd_m2']:,.4g} cd/m²"))
+        rows.append(("Background", f"{hud['background_cd_m2']:,.4g} cd/m²"))
+        if "environment_behind_symbols_cd_m2" in hud:
+            rows.append(("Behind the symbols", f"{hud['background_behind_symbols_cd_m2']:,.4g} cd/m² (environment "
+                                               f"{hud['environment_behind_symbols_cd_m2']:,.4g})"))
+        if hud["contrast_ratio"] is not None:
+            rows.append(("Contrast (Ls + Lb) / Lb", f"{hud['contrast_ratio']:,.4g} : 1"))
+    elif "display_cd_m2" in hud:
+        rows.append(("Display", f"{hud['display_cd_m2']:,.4g} cd/m² ({hud.get('note', '')})"))
+    elif hud.get("note"):
+        rows.append(("Display", hud["note"]))
+    spot = hud.get("spot")
+    if spot:
+        rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {spot['peak_over_median_background']:.3g} x the "
+                             f"background, {spot['half_peak_diameter_deg']:.2g} deg"))
+        if spot.get("contrast_against_environment") is not None:
+            rows.append(("Spot against the environment", f"{spot['contrast_against_environment']:.4g} : 1 (environment "
+                                                         f"{spot['environment_cd_m2']:,.4g} cd/m²)"))
+    ghost = (report.get("brightness_theorem") or {}).get("ghost")
+    if ghost and ghost.get("ratio_to_symbol") is not None:
+        dx, dy = ghost["offset_px"]
+        rows.append(("Ghost", f"{ghost['ratio_to_symbol']:.3g} of the symbols, {ghost['offset_mrad']:.3g} mrad "
+                              f"({dx:+d}, {dy:+d} px)"))
+    lum = report["luminance"]
+    rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
+    mode = report.get("adaptation_mode", "log_average").replace("_", "-")
+    rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² ({mode})"))
+    for name, ch in (report.get("method_details") or {}).get("channels", {}).items():
+        rows.append((f"Channel {name}", f"{ch['method']} ({ch['chosen_by']}), {ch['mean_cd_m2']:,.4g} cd/m² mean"
+                     if ch.get("method") else f"skipped: {ch['skipped']}"))
+    noise = report["noise"]["median_relative_standard_error_lit_pixels"]
+    if noise is not None:
+        rows.append(("Noise", f"{100 * noise:.3g} % per lit pixel (median standard error)"))
+    rows.append(("Efficiency", f"{report['efficiency']:.3g}"))
+    rows.append(("Rays", f"{report['rays']:,} in {report['seconds']:.3g} s ({report['rays_per_second'] / 1e6:.3g} M/s, "
+                         f"{report['workers']} process{'es' if report['workers'] > 1 else ''})"
+                         + (", stopped early" if report["partial"] else "")))
+    return rows

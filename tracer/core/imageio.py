@@ -1,0 +1,285 @@
+"""Image files: reading panoramas and textures, writing EXR results and PNG previews.
+
+All file access goes through OpenImageIO (https://openimageio.readthedocs.io). Arrays are
+indexed ``[row, column, channel]`` with row 0 the TOP row of the image, as files store it.
+
+Colour encoding follows IEC 61966-2-1:1999 (sRGB): integer files (8/16-bit PNG, JPEG,
+TIFF...) hold sRGB-encoded values and are decoded to linear on reading; float files (EXR,
+Radiance HDR, float TIFF) hold linear values and are returned as stored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import numbers
+import os
+import sys
+import uuid
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from .errors import ImageReadError
+
+#: OpenImageIO base types of files whose values are linear (returned as stored by default).
+_FLOAT_BASETYPES = (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
+
+#: Range of an EXR ``int`` header attribute (32-bit signed).
+_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+
+
+def srgb_decode(v) -> np.ndarray:
+    """sRGB-encoded values to linear ones (IEC 61966-2-1:1999, section 5.2).
+
+    ``L = v / 12.92`` for ``v <= 0.04045``, else ``L = ((v + 0.055) / 1.055) ** 2.4``.
+
+    Parameters
+    ----------
+    v : array_like, any shape
+        Encoded values, nominally in [0, 1]; values below 0.04045 (negative ones included)
+        follow the linear segment.
+
+    Returns
+    -------
+    np.ndarray, same shape as ``v``, float64
+        Linear values.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    curve = ((np.maximum(v, 0.04045) + 0.055) / 1.055) ** 2.4
+    return np.where(v <= 0.04045, v / 12.92, curve)
+
+
+def srgb_encode(v) -> np.ndarray:
+    """Linear values to sRGB-encoded ones (IEC 61966-2-1:1999, section 5.3).
+
+    ``V = 12.92 L`` for ``L <= 0.0031308``, else ``V = 1.055 L ** (1 / 2.4) - 0.055``.
+
+    Parameters
+    ----------
+    v : array_like, any shape
+        Linear values, nominally in [0, 1]; values below 0.0031308 (negative ones included)
+        follow the linear segment.
+
+    Returns
+    -------
+    np.ndarray, same shape as ``v``, float64
+        Encoded values.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    curve = 1.055 * np.maximum(v, 0.0031308) ** (1.0 / 2.4) - 0.055
+    return np.where(v <= 0.0031308, 12.92 * v, curve)
+
+
+@contextlib.contextmanager
+def _c_stderr_silenced():
+    """Send what C libraries write to file descriptor 2 while the block runs to /dev/null: libpng
+    prints its errors there, beside the error text OpenImageIO returns (which the caller reports)."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no file descriptor 2 (an embedding host): nothing to silence
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+def _read_pixels(path) -> tuple[oiio.ImageSpec, np.ndarray]:
+    """Read the first subimage of ``path`` as stored, as float32 of shape (H, W, C).
+
+    Colour is not multiplied by alpha (the ``oiio:UnassociatedAlpha`` reader hint). Raises
+    :class:`ImageReadError` with OpenImageIO's error text on failure; what the format's C library
+    prints on the way is kept off the terminal (a truncated PNG made libpng print two more lines).
+    """
+    with _c_stderr_silenced():
+        return _read_pixels_as_stored(path)
+
+
+def _read_pixels_as_stored(path) -> tuple[oiio.ImageSpec, np.ndarray]:
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise ImageReadError(path, oiio.geterror() or "cannot open the file")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(oiio.FLOAT)
+        if pixels is None:
+            raise ImageReadError(path, inp.geterror() or "cannot read the pixels")
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels, dtype=np.float32)
+    return spec, pixels.reshape(spec.height, spec.width, spec.nchannels)
+
+
+def read_image(path, linear: bool | None = None) -> np.ndarray:
+    """Read the first subimage of an image file as linear float values.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any file format OpenImageIO reads (EXR, HDR, PNG, JPEG, TIFF...).
+    linear : bool or None
+        ``None``: integer formats are sRGB-decoded (:func:`srgb_decode`), float formats are
+        returned as stored. ``True``: values are returned as stored whatever the format.
+        ``False``: values are sRGB-decoded whatever the format. An alpha channel is never
+        decoded, and it is not multiplied into the colour channels (PNG and TIFF
+        unassociated alpha stays unassociated).
+
+    Returns
+    -------
+    np.ndarray, shape (H, W, C), float32
+        Row 0 is the top row. C is the file's channel count (1 grey, 3 RGB, 4 RGBA...);
+        the alpha channel, if any, is kept. Integer formats are normalised to [0, 1] first.
+
+    Raises
+    ------
+    ImageReadError
+        The file is missing, unreadable or of a format OpenImageIO does not know; the reason
+        is OpenImageIO's error text.
+    """
+    spec, pixels = _read_pixels(path)
+    decode = spec.format.basetype not in _FLOAT_BASETYPES if linear is None else not linear
+    if decode:
+        colour = [c for c in range(spec.nchannels) if c != spec.alpha_channel]
+        pixels[..., colour] = srgb_decode(pixels[..., colour])
+    return pixels
+
+
+def _write_atomically(path, format_name: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
+    """Write ``pixels`` (H, W, C) in ``format_name`` to a temporary file beside ``path``,
+    then move it onto ``path`` with :func:`os.replace`, so that readers never see a partial
+    file. Raises ``OSError`` with OpenImageIO's error text if the file cannot be written."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    out = oiio.ImageOutput.create(format_name)
+    if out is None:
+        raise OSError(f"{path}: {oiio.geterror()}")
+    try:
+        ok = out.open(str(tmp), spec) and out.write_image(pixels)
+        error = out.geterror()
+        ok = out.close() and ok
+        if not ok:
+            raise OSError(f"{path}: {error or out.geterror() or 'cannot write the image'}")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_exr(path, channels: dict[str, np.ndarray], attributes: dict | None = None) -> None:
+    """Write named float channels to an OpenEXR file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; it is written as OpenEXR whatever its extension.
+    channels : dict[str, np.ndarray]
+        Channel name -> array of shape (H, W) (row 0 is the top row), all of the same shape;
+        stored as 32-bit float in the given order (e.g. ``R, G, B, Y, Y_var``). Note that
+        OpenEXR itself keeps channels sorted by name, so a reader may list them in another
+        order; :func:`read_exr_channels` returns them by name.
+    attributes : dict[str, str | int | float] or None
+        Header metadata. ``str`` -> EXR ``string``, ``int`` -> EXR ``int`` (32-bit signed),
+        ``float`` -> EXR ``float`` (32-bit: about 7 significant digits survive; store a
+        string where an exact value matters). ``bool`` is refused.
+
+    Raises
+    ------
+    ValueError
+        No channels, channels of different or non-2-D shapes, an int attribute outside the
+        32-bit range.
+    TypeError
+        An attribute value that is not str, int or float.
+    OSError
+        The file cannot be written.
+    """
+    if not channels:
+        raise ValueError("write_exr needs at least one channel")
+    names = list(channels)
+    planes = [np.asarray(channels[name], dtype=np.float32) for name in names]
+    shape = planes[0].shape
+    if len(shape) != 2 or any(p.shape != shape for p in planes):
+        raise ValueError(
+            f"channels must be 2-D arrays of one shape, got {[p.shape for p in planes]}"
+        )
+    spec = oiio.ImageSpec(shape[1], shape[0], len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    for key, value in (attributes or {}).items():
+        if isinstance(value, str):
+            spec.attribute(key, value)
+        elif isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            if not _INT32_MIN <= value <= _INT32_MAX:
+                raise ValueError(
+                    f"attribute {key!r} = {value} is outside the 32-bit EXR int range; "
+                    "store it as a string"
+                )
+            spec.attribute(key, int(value))
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+            spec.attribute(key, float(value))
+        else:
+            raise TypeError(
+                f"attribute {key!r} must be str, int or float, got {type(value).__name__}"
+            )
+    spec.attribute("compression", "zip")
+    _write_atomically(path, "openexr", spec, np.stack(planes, axis=-1))
+
+
+def read_exr_channels(path) -> tuple[dict[str, np.ndarray], dict]:
+    """Read every channel of an image file by name, with its header metadata.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An OpenEXR file (any format OpenImageIO reads works).
+
+    Returns
+    -------
+    channels : dict[str, np.ndarray]
+        Channel name -> array of shape (H, W), float32, as stored (no decoding); row 0 is
+        the top row.
+    attributes : dict
+        Every header attribute OpenImageIO reports, name -> value (those written by
+        :func:`write_exr` included, plus format ones such as ``compression``).
+
+    Raises
+    ------
+    ImageReadError
+        The file is missing, unreadable or of an unknown format.
+    """
+    spec, pixels = _read_pixels(path)
+    channels = {name: pixels[..., i].copy() for i, name in enumerate(spec.channelnames)}
+    attributes = {a.name: a.value for a in spec.extra_attribs}
+    return channels, attributes
+
+
+def write_png(path, rgb8: np.ndarray) -> None:
+    """Write an 8-bit sRGB-encoded RGB image to a PNG file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; it is written as PNG whatever its extension.
+    rgb8 : np.ndarray, shape (H, W, 3), uint8
+        Encoded pixel values, row 0 the top row (e.g. from
+        :func:`tracer.products.tonemap.tonemap_ward`).
+
+    Raises
+    ------
+    ValueError
+        ``rgb8`` is not a (H, W, 3) uint8 array.
+    OSError
+        The file cannot be written.
+    """
+    rgb8 = np.asarray(rgb8)
+    if rgb8.dtype != np.uint8 or rgb8.ndim != 3 or rgb8.shape[2] != 3:
+        raise ValueError(f"rgb8 must be a (H, W, 3) uint8 array, got {rgb8.dtype} {rgb8.shape}")
+    spec = oiio.ImageSpec(rgb8.shape[1], rgb8.shape[0], 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    _write_atomically(path, "png", spec, np.ascontiguousarray(rgb8))

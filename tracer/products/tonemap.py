@@ -1,0 +1,149 @@
+"""Tone mapping of rendered luminance images into 8-bit sRGB previews.
+
+The preview shows the scene as an eye adapted to it would judge it, with Ward's
+contrast-based scale factor: one linear factor for the whole image, so luminance ratios (the
+contrast of a HUD symbol against its background, for instance) are kept exactly up to
+display white.
+
+References
+----------
+G. Ward, "A contrast-based scalefactor for luminance display", in P. Heckbert (ed.),
+Graphics Gems IV, Academic Press, 1994, doi:10.1016/B978-0-12-336156-1.50054-9.
+
+E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction for digital
+images", ACM Transactions on Graphics 21(3), 2002, pp. 267-276, doi:10.1145/566654.566575
+(log-average luminance, their equation 1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.imageio import srgb_encode
+from ..core.units import luminance
+
+
+def log_average_luminance(Y, delta: float = 1e-4) -> float:
+    """Log-average ("key") luminance of an image, ``exp(mean(ln(delta + Y)))``.
+
+    Reinhard et al. 2002, equation 1 (doi:10.1145/566654.566575); Ward 1994 adapts the eye
+    to the same quantity.
+
+    Parameters
+    ----------
+    Y : array_like, shape (H, W)
+        Luminance, cd/m^2, >= 0. Non-finite values (NaN, +-Inf) are ignored.
+    delta : float
+        Small positive luminance, cd/m^2, that keeps the logarithm of black pixels finite.
+
+    Returns
+    -------
+    float
+        Log-average luminance, cd/m^2. An image with no light (all zero), or with no finite
+        value at all, gives ``delta``.
+
+    Raises
+    ------
+    ValueError
+        ``delta`` is not finite and positive, or a finite luminance is negative.
+    """
+    if not (np.isfinite(delta) and delta > 0):
+        raise ValueError(f"delta must be finite and > 0, got {delta}")
+    Y = np.asarray(Y, dtype=np.float64)
+    finite = Y[np.isfinite(Y)]
+    if np.any(finite < 0):
+        raise ValueError("luminance must be >= 0")
+    if finite.size == 0:
+        return float(delta)
+    return float(np.exp(np.mean(np.log(delta + finite))))
+
+
+def ward_scale_factor(L_wa: float, L_dmax: float = 100.0) -> float:
+    """Ward's contrast-based scale factor m (Ward 1994, doi:10.1016/B978-0-12-336156-1.50054-9).
+
+    ``m = [(1.219 + L_da ** 0.4) / (1.219 + L_wa ** 0.4)] ** 2.5`` with the display adaptation
+    luminance ``L_da = L_dmax / 2``. A world luminance L is shown with display luminance
+    ``m L``, i.e. with the display input value ``m L / L_dmax`` (1 is display white).
+
+    Parameters
+    ----------
+    L_wa : float
+        World adaptation luminance, cd/m^2, >= 0.
+    L_dmax : float
+        Maximum (white) luminance of the display, cd/m^2, > 0.
+
+    Returns
+    -------
+    float
+        m, dimensionless.
+
+    Raises
+    ------
+    ValueError
+        ``L_wa`` negative or ``L_dmax`` not positive, or either not finite.
+    """
+    if not (np.isfinite(L_wa) and L_wa >= 0):
+        raise ValueError(f"adaptation luminance must be finite and >= 0, got {L_wa}")
+    if not (np.isfinite(L_dmax) and L_dmax > 0):
+        raise ValueError(f"display maximum luminance must be finite and > 0, got {L_dmax}")
+    L_da = L_dmax / 2.0
+    return float(((1.219 + L_da**0.4) / (1.219 + L_wa**0.4)) ** 2.5)
+
+
+def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float = 100.0):
+    """8-bit sRGB preview of a linear RGB luminance image, with Ward's scale factor.
+
+    Every channel is multiplied by ``m / L_dmax`` (:func:`ward_scale_factor`), values above
+    display white (1) are clipped per channel, and the result is sRGB-encoded
+    (IEC 61966-2-1) and rounded to 8 bits. Below white, luminance ratios are preserved.
+
+    Parameters
+    ----------
+    rgb : array_like, shape (H, W, 3)
+        Linear Rec.709 RGB, scaled so that ``Y = 0.2126 R + 0.7152 G + 0.0722 B`` is the
+        luminance in cd/m^2; finite and >= 0.
+    adaptation_luminance : float or None
+        World adaptation luminance L_wa, cd/m^2; ``None`` uses the log-average luminance of
+        the image (:func:`log_average_luminance`).
+    L_dmax : float
+        Display white luminance, cd/m^2.
+
+    Returns
+    -------
+    png : np.ndarray, shape (H, W, 3), uint8
+        sRGB-encoded preview, row 0 the top row.
+    info : dict
+        ``adaptation_luminance`` (cd/m^2), ``scale_factor`` (m), ``display_max_luminance``
+        (L_dmax, cd/m^2), ``clipped_fraction`` (fraction of pixels with any channel above
+        display white) and ``clipping`` (a sentence saying how such pixels are shown).
+
+    Raises
+    ------
+    ValueError
+        ``rgb`` is not a non-empty (H, W, 3) array, or holds a non-finite or negative value
+        (a bug upstream: a preview never hides one).
+    """
+    rgb = np.asarray(rgb, dtype=np.float64)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.size == 0:
+        raise ValueError(f"rgb must be a non-empty (H, W, 3) array, got shape {rgb.shape}")
+    if not np.all(np.isfinite(rgb)):
+        raise ValueError("rgb holds non-finite values (NaN or Inf)")
+    if np.any(rgb < 0):
+        raise ValueError("rgb holds negative values")
+    if adaptation_luminance is None:
+        adaptation_luminance = log_average_luminance(luminance(rgb))
+    m = ward_scale_factor(adaptation_luminance, L_dmax)
+    display = rgb * (m / L_dmax)
+    clipped = np.any(display > 1.0, axis=-1)
+    png = np.rint(srgb_encode(np.minimum(display, 1.0)) * 255.0).astype(np.uint8)
+    info = {
+        "adaptation_luminance": float(adaptation_luminance),
+        "scale_factor": m,
+        "display_max_luminance": float(L_dmax),
+        "clipped_fraction": float(np.mean(clipped)),
+        "clipping": (
+            f"each channel clipped at display white (L_dmax = {L_dmax:g} cd/m^2 after Ward "
+            "scaling); hue shifts in clipped pixels"
+        ),
+    }
+    return png, info

@@ -1,0 +1,2 @@
+"""Layer 7, runtime: where batches run (worker processes, a Dask cluster) and the process settings
+they need."""

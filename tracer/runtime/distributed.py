@@ -1,0 +1,102 @@
+"""The seed-addressed batches of :mod:`tracer.runtime.parallel` on a Dask distributed cluster.
+
+    from dask.distributed import Client
+    client = Client("tcp://scheduler:8786")          # or a LocalCluster
+    result = render_dask(integrator, Budget(rays=10**9), client)
+
+The scene folder travels once to the cluster, zipped in memory (no shared file system is needed);
+each worker unpacks it once, builds its own integrator and Embree scene, and traces the batches it
+is given. The parent merges films in batch order with the same rule as a local render, so the same
+seeds give the same image as one process. Dask is optional: ``pip install "dask[distributed]"``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+from ..methods import INTEGRATORS, Budget, RenderResult
+from ..methods.base import drive
+from ..scene import EyeSpec, load_scene
+from ..transport.eye import ThinLensEye
+from ..transport.world import World
+from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
+
+_UNPACKED: dict[str, str] = {}
+
+
+def pack_scene(folder) -> bytes:
+    """The scene folder as zip bytes."""
+    buf = io.BytesIO()
+    root = Path(folder)
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for p in sorted(root.rglob("*")):
+            if p.is_file():
+                z.write(p, p.relative_to(root).as_posix())
+    return buf.getvalue()
+
+
+def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_size: int, options: dict, eye,
+                     index: int):
+    """Runs on a Dask worker: unpack the scene once, keep one integrator per render, trace a batch."""
+    key = (digest, method, seed, batch_size, repr(options), repr(eye))
+    if _WORKER.get("key") != key:
+        if digest not in _UNPACKED:
+            folder = Path(tempfile.mkdtemp(prefix="hud-dask-"))
+            with zipfile.ZipFile(io.BytesIO(blob)) as z:
+                z.extractall(folder)
+            _UNPACKED[digest] = str(folder)
+        world = World(load_scene(_UNPACKED[digest]), ThinLensEye(EyeSpec(**eye)))
+        _WORKER["integrator"] = INTEGRATORS[method](world, seed, batch_size, options)
+        _WORKER["key"] = key
+    return _run_batch(index)
+
+
+class DaskExecutor:
+    """The driver's executor over a Dask client: futures, waited for with FIRST_COMPLETED."""
+
+    def __init__(self, client, submit, workers: int):
+        self.client, self._submit, self.workers = client, submit, workers
+
+    def submit(self, index: int):
+        return self._submit(index)
+
+    def wait(self, handles: dict, timeout: float | None) -> list[int]:
+        from distributed import wait
+
+        futures = {f: k for k, f in handles.items()}
+        try:
+            done, _ = wait(list(futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            return []
+        return [futures[f] for f in done]
+
+    def result(self, handle):
+        return handle.result()
+
+
+def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
+                should_stop=None) -> RenderResult:
+    """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
+    started = time.perf_counter()  # a time budget counts the pilot and the upload of the scene
+    budget = local.prepare(budget)  # before the batch size and the options travel to the workers
+    blob = pack_scene(local.scene.root)
+    digest = hashlib.sha256(blob).hexdigest()
+    [blob_future] = client.scatter([blob], broadcast=True)
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    args = (blob_future, digest, local.name, local.seed, local.batch_size, local.worker_options(),
+            dataclasses.asdict(local.eye.spec))
+
+    def submit(k):
+        return client.submit(_batch_on_worker, *args, k, pure=False,
+                             key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
+
+    result = drive(local, budget, DaskExecutor(client, submit, workers), in_flight or 2 * workers, progress,
+                   should_stop, f"dask x{workers}", started=started)
+    result.extra["dask_workers"] = workers
+    return result

@@ -1,0 +1,248 @@
+"""Rendering on several cores: seed-addressed batches in worker processes, merged exactly.
+
+Batch k of a render draws its random numbers from ``make_rng(seed, k)`` only (see
+:mod:`tracer.methods.base`), so its film does not depend on which process traced it. The same
+driver (:func:`tracer.methods.base.drive`) serves one process, local worker processes here and
+Dask clusters in :mod:`tracer.runtime.distributed`. Workers (started with "spawn", each with its own render
+world and Embree scene, built from the scene folder) trace batches handed out in increasing order;
+the parent keeps every batch's film apart until the contiguous prefix 0..B-1 meets the budget, the
+same rule a single process applies, and adds exactly that prefix in batch order. With a budget in
+rays the image is therefore the same for any number of workers: the same batches, rays and paths,
+and pixel values equal to the last bits of rounding. With a budget in seconds it is the prefix that
+was done in time.
+
+The clock of the budget starts when every worker has built its world (start-up is reported apart,
+as ``startup_seconds``); the parent blocks on a queue that the pool's completion callbacks fill,
+so it takes no CPU from the workers while it waits.
+
+Workers are plain Python processes, whether the parent is the command line or Blender. Inside
+Blender the tracer is a subpackage of the extension (``bl_ext.<repository>.hud_tracer.tracer``),
+whose top packages Blender makes up at run time: a worker first recreates them from the parent's
+package paths (:func:`_bootstrap`), so that the functions and results that cross between the
+processes keep their names. The parent's main module (a Blender script, the console script) is
+hidden from the workers: they need only the tracer.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import importlib.machinery
+import multiprocessing as mp
+import os
+import queue
+import signal
+import sys
+import time
+import types
+from pathlib import Path
+
+import numpy as np
+
+from ..core.validate import check_workers
+from ..methods import INTEGRATORS, Budget, RenderResult
+from ..methods.base import drive
+from ..scene import EyeSpec, load_scene
+from ..transport.eye import ThinLensEye
+from ..transport.world import World
+from .allocator import keep_freed_memory
+
+_WORKER: dict = {}
+#: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
+READY = "ready"
+#: Seconds the parent waits for its workers to start.
+STARTUP_TIMEOUT = 600.0
+
+
+def _await_workers(pool, ready, workers: int):
+    """Wait until every worker has built its world. Raises RuntimeError with the worker's message when
+    one could not, and when a worker process exits while starting (the pool would start another in
+    its place, forever: a worker that cannot even import the tracer)."""
+    pids = {p.pid for p in pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
+    deadline = time.perf_counter() + STARTUP_TIMEOUT
+    started = 0
+    while started < workers:
+        try:
+            msg = ready.get(timeout=0.5)
+        except queue.Empty:
+            if {p.pid for p in pool._pool} - pids or any(p.exitcode is not None for p in pool._pool):
+                raise RuntimeError("a worker process exited while starting (see its message above)") from None
+            if time.perf_counter() > deadline:
+                raise RuntimeError(f"the worker processes did not start within {STARTUP_TIMEOUT:.0f} s") from None
+            continue
+        if msg != READY:
+            raise RuntimeError(f"a worker process could not start: {msg}")
+        started += 1
+
+
+def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, scene_hash: str,
+                 allow_external: bool, ready):
+    """A worker's start: its own world (the scene folder's, seen by the parent's eye ``eye``, the fields
+    of an EyeSpec: a pupil that follows the image was chosen there), the integrator of ``method`` with
+    the parent's ``options`` (what its prepare decided), and the roulette's pilot. The folder must still
+    hold the parent's scene (``scene_hash``): one edited since, on disk or in the parent's memory, would
+    render another scene in the workers. Arguments are plain data: inside Blender nothing of the tracer
+    can be unpickled before tracer/runtime/worker_bootstrap.py ran."""
+    # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP reaches the whole process group,
+    # and a worker must not die of it mid-batch with a traceback. SIGTERM keeps its default (a quiet
+    # exit): the pool ends its workers with it.
+    for name in ("SIGINT", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
+    keep_freed_memory()  # a worker process exists to trace
+    try:
+        scene = load_scene(scene_dir, allow_external=allow_external)
+        if scene.scene_hash != scene_hash:
+            raise RuntimeError(f"{scene_dir} holds another scene than the one the render began with (changed on disk "
+                               "since, or edited in memory: workers load the folder)")
+        integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
+        integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
+    except Exception as e:  # noqa: BLE001 - told to the parent, which stops the pool (a raise would respawn us)
+        ready.put(f"{type(e).__name__}: {e}")
+        return
+    _WORKER["integrator"] = integrator
+    ready.put(READY)
+
+
+def _run_batch(index: int):
+    return _WORKER["integrator"].trace_batch(index)
+
+
+#: This package's import name ("tracer" on the command line; a subpackage inside Blender).
+PACKAGE = __name__.rpartition(".")[0]
+
+
+def _made_up_packages() -> list[tuple[str, list[str]]]:
+    """(name, search path) of the packages above this one that a plain interpreter cannot import from
+    ``sys.path`` (Blender's ``bl_ext`` and its repositories, which have no file of their own), outermost
+    first; empty on the command line."""
+    parts = PACKAGE.split(".")
+    out = []
+    for i in range(1, len(parts)):
+        name = ".".join(parts[:i])
+        module = sys.modules[name]
+        origin = getattr(getattr(module, "__spec__", None), "origin", None)
+        if origin and os.path.isfile(origin):
+            break  # a package with its own __init__.py: it and what lies below import as usual
+        if i == 1 and importlib.machinery.PathFinder.find_spec(name, sys.path) is not None:
+            break
+        out.append((name, list(getattr(module, "__path__", None) or [])))
+    return out
+
+
+def _worker_init(init_args: tuple):
+    """(initializer, initargs) of the pool. Where this package imports under its own name in a plain
+    interpreter, the initializer is :func:`_init_worker`; otherwise the made-up packages must exist
+    before anything of this package can be unpickled in the worker, so the initializer is
+    ``runpy.run_path`` (a standard-library function) of tracer/runtime/worker_bootstrap.py, a script that
+    imports nothing of this package, with the arguments in its globals."""
+    packages = _made_up_packages()
+    if not packages:
+        return _init_worker, init_args
+    import runpy
+
+    script = str(Path(__file__).with_name("worker_bootstrap.py"))
+    return runpy.run_path, (script, {"ARGS": (packages, PACKAGE, init_args)}, "__hud_worker__")
+
+
+def python_executable() -> str | None:
+    """The Python interpreter that runs worker processes: ``sys.executable`` when it is one (the
+    command line; Blender 2.91 and later point it at their bundled Python), else the interpreter under
+    ``sys.prefix``, else None (no workers can start)."""
+    name = Path(sys.executable).name.lower()
+    if name.startswith("python"):
+        return sys.executable
+    for cand in (Path(sys.prefix) / "bin" / f"python{sys.version_info[0]}.{sys.version_info[1]}",
+                 Path(sys.prefix) / "bin" / "python3", Path(sys.prefix) / "python.exe",
+                 Path(sys.prefix) / "bin" / "python.exe"):
+        if cand.is_file() and os.access(cand, os.X_OK):
+            return str(cand)
+    return None
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """While workers start, the parent's main module is an empty one: "spawn" would otherwise run a
+    Blender script or console script again in every worker, and workers need only this package."""
+    saved = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        if saved is not None:
+            sys.modules["__main__"] = saved
+
+
+class PoolExecutor:
+    """The driver's executor over a multiprocessing pool: completions arrive on a queue."""
+
+    def __init__(self, pool, workers: int):
+        self.pool = pool
+        self.workers = workers
+        self.done: queue.Queue = queue.Queue()
+
+    def submit(self, index: int):
+        return self.pool.apply_async(_run_batch, (index,), callback=lambda _r, k=index: self.done.put(k),
+                                     error_callback=lambda _e, k=index: self.done.put(k))
+
+    def wait(self, handles: dict, timeout: float | None) -> list[int]:
+        try:
+            first = self.done.get(timeout=timeout)
+        except queue.Empty:
+            return []
+        out = [first]
+        while True:
+            try:
+                out.append(self.done.get_nowait())
+            except queue.Empty:
+                break
+        return [k for k in out if k in handles]
+
+    def result(self, handle):
+        return handle.get()
+
+
+def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None,
+                    preview=None) -> RenderResult:
+    """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
+    folder, method, seed and batch size; see the module docstring). Raises RuntimeError when no
+    Python interpreter for the workers is found (:func:`python_executable`), and
+    :class:`tracer.core.validate.WorkersError` when the machine's memory does not hold ``workers``
+    processes."""
+    check_workers(workers, local.scene.eye.resolution)  # WorkersError before the pilot and any process
+    started = time.perf_counter()  # a time budget counts the pilot and the workers' start-up
+    budget = local.prepare(budget)  # before the workers take the batch size and the options
+    executable = python_executable()
+    if executable is None:
+        raise RuntimeError(f"no Python interpreter to run worker processes (sys.executable is {sys.executable})")
+    ctx = mp.get_context("spawn")
+    ctx.set_executable(executable)
+    ready = ctx.Queue()
+    initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
+                                          local.worker_options(), dataclasses.asdict(local.eye.spec),
+                                          local.scene.scene_hash, local.scene.allow_external, ready))
+    t0 = time.perf_counter()
+    with _main_hidden():
+        pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
+    with pool:  # leaving it on an error terminates the workers
+        _await_workers(pool, ready, workers)
+        startup = time.perf_counter() - t0
+        result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop, f"x{workers}",
+                       started=started, preview=preview)
+        # Batches still in flight are not needed, but the workers finish them (at most two each, of a
+        # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() then hung
+        # now and then in CPython's task handler (waiting for the inqueue's lock, never released).
+        pool.close()
+        pool.join()
+    result.extra["workers"] = workers
+    result.extra["startup_seconds"] = startup
+    return result
+
+
+def films_match(a: RenderResult, b: RenderResult, rtol: float = 1e-12) -> bool:
+    """Whether two results hold the same film up to rounding in the last bits (the determinism
+    check of the tests: independent sampling would differ by far more)."""
+    fa, fb = a.film, b.film
+    return (fa.norm == fb.norm and fa.replicates == fb.replicates
+            and all(np.allclose(fa.sums[k], fb.sums[k], rtol=rtol, atol=0) for k in fa.kinds)
+            and np.allclose(fa.rep_sq, fb.rep_sq, rtol=rtol, atol=0))

@@ -1,0 +1,577 @@
+"""Eyebox of a HUD: where the eye can move and still see the whole display lit.
+
+For eye positions on a grid of offsets in the design eye's right/up plane, the deterministic
+brightness-theorem analysis (:func:`tracer.transport.chains.specular_paths`: chief rays through every
+specular branch, scattering surfaces lit directly by the emitters) predicts the luminance of the
+display, with every LCD cell made clear, at five points of its virtual image: the centre of the
+display field and points at :data:`CORNER` (80 %) of its half-extent toward its four corners
+(:data:`FIELD_POINTS`). The points are fixed in space at the eye's accommodation distance (or are
+fixed directions, for an eye focused at infinity), so an eye that moves looks at the same image
+points, as a driver does. The eyebox is where all five stay at or above ``threshold`` (50 %) of
+their value at the design eye. The display's own light is counted; the environment is left out.
+
+The luminance of a field point is the brightness theorem's: the luminance of what the chain ends on
+times the reflectances and transmittances along it (luminance is conserved along a lossless
+specular chain; Potemin, Zhdanov et al., Proc. SPIE 10690, 106900I (2018), doi:10.1117/12.2312589,
+and :mod:`tracer.transport.chains`). Only the chief ray from the pupil's centre is followed at each
+offset: the eye travels some 100 mm across an eyebox while its pupil spans 2 to 8 mm, and the
+pupil average differs from the chief ray only where a source is imaged into part of the pupil.
+
+The analysis follows light that reaches scattering surfaces directly from the emitters. Where a
+scattering surface is lit through specular optics (hud-screen's rear-projection screen behind its
+projection lens, hud-direct-condenser's scatterer behind a condenser) it cannot predict the
+display, and the result says so (``valid`` false, ``reasons``), as
+:func:`tracer.products.render.brightness_theorem` does for its sections.
+
+Outputs (:func:`output_files`): eyebox.csv (one row per offset), eyebox.png (:func:`eyebox_chart`)
+and eyebox.json (:meth:`EyeboxResult.summary`), written as a set (:mod:`tracer.products.outputs`).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..analysis.hud import erode
+from ..products.falsecolour import (
+    GLYPH_H,
+    INK,
+    PAPER,
+    colour_legend,
+    colour_map,
+    draw_text,
+    legend_space,
+    png_file,
+    text_size,
+    write_as_set,
+)
+from ..products.outputs import OutputFile
+from ..products.render import SPECULAR_SHARE, _per_pixel, finite_json
+from ..scene import Scene
+from ..transport.chains import specular_paths
+from ..transport.world import World
+
+#: The field points, in the order of the luminance arrays: (name, sign of the right and up offsets).
+FIELD_POINTS = (("centre", 0, 0), ("upper left", -1, 1), ("upper right", 1, 1), ("lower left", -1, -1),
+                ("lower right", 1, -1))
+#: Share of the display's half-extent at which the four outer field points lie.
+CORNER = 0.8
+#: Most eye offsets a scan may have (a typing slip in a step should not start an hour-long scan).
+MAX_OFFSETS = 20_000
+#: Files of :func:`output_files`, in the output folder.
+OUTPUT_NAMES = ("eyebox.csv", "eyebox.png", "eyebox.json")
+#: The outline of the eyebox and the design eye's mark in the chart.
+OUTLINE = (230, 0, 0)
+
+
+class FieldNotFound(ValueError):
+    """The display field cannot be found from the scene: the caller must give it."""
+
+
+class ScanArgumentError(ValueError):
+    """An argument of :func:`eyebox_scan` out of its range: ``argument`` names it, ``message`` says why."""
+
+    def __init__(self, argument: str, message: str):
+        self.argument, self.message = argument, message
+        super().__init__(f"{argument}: {message}")
+
+
+@dataclass
+class Field:
+    """The display field as seen from the design eye, in tangent space of the eye's (right, up) axes:
+    a direction gaze + a right + b up has coordinates (a, b). ``centre`` (2,), ``half`` (2,) the
+    half-extents; ``from_scene`` says whether it was found from the scene or given."""
+
+    centre: np.ndarray
+    half: np.ndarray
+    from_scene: bool
+
+    @classmethod
+    def given(cls, field_deg) -> Field:
+        """A field of ``field_deg`` (full width, full height, deg) centred on the gaze."""
+        return cls(np.zeros(2), np.tan(np.radians(np.asarray(field_deg, dtype=np.float64)) / 2), False)
+
+    @property
+    def deg(self) -> np.ndarray:
+        """Full angular extent (deg) of the field, right and up: atan(c + h) - atan(c - h)."""
+        return np.degrees(np.arctan(self.centre + self.half) - np.arctan(self.centre - self.half))
+
+    @property
+    def centre_deg(self) -> np.ndarray:
+        return np.degrees(np.arctan(self.centre))
+
+    def points(self) -> np.ndarray:
+        """(5, 2) tangent coordinates of :data:`FIELD_POINTS`."""
+        signs = np.array([(a, b) for _, a, b in FIELD_POINTS], dtype=np.float64)
+        return self.centre + CORNER * signs * self.half
+
+
+def clear_lcd(scene: Scene) -> Scene:
+    """A copy of ``scene`` with every LCD cell clear (its slide made white); other objects shared."""
+    def clear(o):
+        if o.material.type != "lcd":
+            return o
+        params = o.material.params | {"image": np.ones_like(o.material.params["image"])}
+        return dataclasses.replace(o, material=dataclasses.replace(o.material, params=params))
+
+    return dataclasses.replace(scene, objects=[clear(o) for o in scene.objects])
+
+
+def display_field(world: World) -> Field:
+    """The display field from the design eye: the angular extent of the pixels whose chief rays reach
+    an LCD cell along the dominant chain through an LCD (:func:`tracer.transport.chains.specular_paths` on
+    its pixel grid), each pixel counted with its whole cell of the grid, so each edge lies within
+    half a grid cell of the display's. Raises :class:`FieldNotFound` where no chief ray reaches an
+    LCD through the specular optics (no LCD, or one imaged onto a screen by a lens, as in hud-screen)."""
+    res = specular_paths(world, environment=False)
+    through_lcd = [p for p in res["paths"] if np.any(np.isfinite(p["lcd"]))]
+    if not through_lcd:
+        ends = sorted({p["path"].split(" > ")[-1] for p in res["paths"]})
+        seen = f" (they end on {', '.join(ends)})" if ends else ""
+        raise FieldNotFound("the display field cannot be found from the scene: no chief ray from the eye reaches an "
+                            f"LCD cell through the specular optics{seen}; give it (field_deg, --field FX FY)")
+    eye = world.eye
+    px = res["pixels"][np.unique(through_lcd[0]["pixel"])]
+    sx, sy = eye.pixel_centers()
+    half_cell = 0.5 * res["stride"] * np.array([eye.pixel_w, eye.pixel_h]) / eye.focal
+    a, b = sx[px % eye.width] / eye.focal, sy[px // eye.width] / eye.focal
+    lo = np.array([a.min(), b.min()]) - half_cell
+    hi = np.array([a.max(), b.max()]) + half_cell
+    return Field(0.5 * (lo + hi), 0.5 * (hi - lo), True)
+
+
+def offsets_mm(half_mm: float, step_mm: float) -> np.ndarray:
+    """Grid offsets (mm): multiples of ``step_mm`` from -``half_mm`` to ``half_mm``, 0 among them."""
+    n = math.floor(half_mm / step_mm + 1e-9)
+    return step_mm * np.arange(-n, n + 1, dtype=np.float64)
+
+
+def _component(mask: np.ndarray, seed: tuple[int, int]) -> np.ndarray:
+    """The 4-connected component of boolean ``mask`` (ny, nx) containing ``seed`` (row, column)."""
+    region = np.zeros_like(mask)
+    if not mask[seed]:
+        return region
+    region[seed] = True
+    while True:
+        grown = region.copy()
+        grown[1:] |= region[:-1]
+        grown[:-1] |= region[1:]
+        grown[:, 1:] |= region[:, :-1]
+        grown[:, :-1] |= region[:, 1:]
+        grown &= mask
+        if np.array_equal(grown, region):
+            return region
+        region = grown
+
+
+def _edges(x: np.ndarray, ratio: np.ndarray, region: np.ndarray, threshold: float) -> tuple[float, float, bool]:
+    """(low edge, high edge, reaches the scan's end) of ``region`` along the last axis of the grid:
+    over the region's lines, the outermost crossing of ``threshold`` by ``ratio``, interpolated
+    linearly between the region's outermost point of each line and its neighbour outside."""
+    lows, highs, clipped = [], [], False
+    for line_r, line_q in zip(region, ratio, strict=True):
+        idx = np.flatnonzero(line_r)
+        if len(idx) == 0:
+            continue
+        for i, out, store in ((idx[0], idx[0] - 1, lows), (idx[-1], idx[-1] + 1, highs)):
+            if not 0 <= out < len(x):
+                clipped = True
+                store.append(x[i])
+                continue
+            q_in, q_out = line_q[i], line_q[out]  # q_in >= threshold > q_out: out is not in the region
+            store.append(x[i] + (q_in - threshold) / (q_in - q_out) * (x[out] - x[i]))
+    return float(min(lows)), float(max(highs)), clipped
+
+
+@dataclass
+class EyeboxResult:
+    """An eyebox scan (:func:`eyebox_scan`). Arrays are indexed [up, right(, field point)].
+
+    right_mm (nx,), up_mm (ny,): eye offsets from the design eye along its right and up axes, mm;
+    step_mm: the grid's step, mm.
+    field: the display field (:class:`Field`); field_points (5, 2) its points' tangent coordinates.
+    luminance_cd_m2 (ny, nx, 5): predicted luminance of each field point (clear LCD), cd/m^2.
+    through_specular_cd_m2 (ny, nx, 5): luminance that the scattering surfaces' light through specular
+    optics (not followed) would add were those optics clear, cd/m^2 (:mod:`tracer.transport.chains`).
+    design_cd_m2 (5,): the field points at the design eye (offset 0, 0), cd/m^2.
+    inside (ny, nx): every field point at or above ``threshold`` x its design value.
+    region (ny, nx): the eyebox: the 4-connected part of ``inside`` that holds the design eye.
+    coarse_cd_m2 (ny, nx, 5): the part of ``luminance_cd_m2`` from lights closer to the scattering
+    surfaces than the analysis' quadrature resolves (a backlight right behind a screen), cd/m^2.
+    valid, reasons: whether the analysis can predict this scene, and why not.
+    figures: :meth:`figures` (None when not valid).
+    """
+
+    scene: str
+    right_mm: np.ndarray
+    up_mm: np.ndarray
+    step_mm: float
+    field: Field
+    threshold: float
+    luminance_cd_m2: np.ndarray
+    through_specular_cd_m2: np.ndarray
+    design_cd_m2: np.ndarray
+    valid: bool
+    reasons: list[str]
+    specular_blockers: dict[str, list[str]]
+    coarse_cd_m2: np.ndarray | None = None
+
+    @property
+    def field_points(self) -> np.ndarray:
+        return self.field.points()
+
+    @property
+    def design_index(self) -> tuple[int, int]:
+        """(row, column) of the design eye in the grid."""
+        return int(np.argmin(np.abs(self.up_mm))), int(np.argmin(np.abs(self.right_mm)))
+
+    @property
+    def relative(self) -> np.ndarray:
+        """(ny, nx): the least, over the field points, of luminance over its design value; NaN where a
+        design value is 0 (nothing to compare with)."""
+        d = self.design_cd_m2
+        if np.any(d <= 0):
+            return np.full(self.luminance_cd_m2.shape[:2], np.nan)
+        return (self.luminance_cd_m2 / d).min(axis=2)
+
+    @property
+    def inside(self) -> np.ndarray:
+        """(ny, nx): every field point at or above the threshold times its design value (none when not valid)."""
+        rel = self.relative
+        return (rel >= self.threshold) if self.valid else np.zeros(rel.shape, bool)
+
+    @property
+    def region(self) -> np.ndarray:
+        return _component(self.inside, self.design_index)
+
+    def figures(self) -> dict | None:
+        """What an optical engineer reads off an eyebox; None when the result is not valid.
+
+        - ``width_mm``, ``height_mm``: the extent of the eyebox (:attr:`region`) along the eye's right
+          and up axes, between its outermost edges; each edge is where the least relative luminance
+          (:attr:`relative`) crosses the threshold, interpolated linearly between the region's
+          outermost grid point on a grid line and its neighbour outside (within half a step of the
+          true edge where the luminance falls like a step, closer where it falls smoothly);
+          ``edges_mm`` {left, right, bottom, top}; ``reaches_scan_edge``: the region touches the
+          scan's border, so the eyebox may be larger (widen the scan).
+        - ``grid_width_mm``, ``grid_height_mm``: the span between the region's outermost grid points
+          (a lower bound; what benchmarks/eyebox.py printed before).
+        - ``field_average_cd_m2``: the mean of the five field points' luminance, its minimum and
+          maximum over the eyebox with the offsets (mm, right and up) where they occur.
+        - ``uniformity``: ``design_eye`` = min / max of the five field points' luminance at the design
+          eye; ``eyebox`` = min / max of all field points' luminance over every offset of the eyebox
+          (the whole display, wherever the eye is in the eyebox), with ``eyebox_min_at`` (offset,
+          field point) of that minimum.
+        """
+        if not self.valid:
+            return None
+        region = self.region
+        rel = self.relative
+        x, z = self.right_mm, self.up_mm
+        left, right, clip_x = _edges(x, rel, region, self.threshold)
+        bottom, top, clip_z = _edges(z, rel.T, region.T, self.threshold)
+        rows, cols = np.nonzero(region)
+        lum = self.luminance_cd_m2
+        avg = lum.mean(axis=2)
+        inner = np.where(region, avg, np.nan)
+        k_min, k_max = np.nanargmin(inner), np.nanargmax(inner)
+
+        def at(k):  # a flat index of the grid -> its offset [right, up], mm
+            return [float(x[k % len(x)]), float(z[k // len(x)])]
+
+        per_point = np.where(region[..., None], lum, np.nan)
+        m_min = int(np.nanargmin(per_point))
+        cell, point = divmod(m_min, len(FIELD_POINTS))
+        d = self.design_cd_m2
+        return {
+            "width_mm": right - left, "height_mm": top - bottom,
+            "edges_mm": {"left": left, "right": right, "bottom": bottom, "top": top},
+            "reaches_scan_edge": bool(clip_x or clip_z),
+            "grid_width_mm": float(x[cols.max()] - x[cols.min()]),
+            "grid_height_mm": float(z[rows.max()] - z[rows.min()]),
+            "offsets_in_eyebox": int(region.sum()),
+            "field_average_cd_m2": {"design_eye": float(d.mean()),
+                                    "min": float(inner.flat[k_min]), "min_at_mm": at(k_min),
+                                    "max": float(inner.flat[k_max]), "max_at_mm": at(k_max)},
+            "uniformity": {"design_eye": float(d.min() / d.max()),
+                           "eyebox": float(np.nanmin(per_point) / np.nanmax(per_point)),
+                           "eyebox_min_at": {"offset_mm": at(cell), "field_point": FIELD_POINTS[point][0]}},
+        }
+
+    def summary(self) -> dict:
+        """The figures with everything needed to read them (eyebox.json)."""
+        f = self.field
+        return {
+            "scene": self.scene,
+            "method": "brightness-theorem analysis (tracer.transport.chains): the chief ray from each eye offset to "
+                      "each field point through every specular branch, every LCD cell clear, the environment left out",
+            "valid": self.valid, "reasons": self.reasons, "specular_blockers": self.specular_blockers,
+            "threshold": self.threshold,
+            "field": {"from_scene": f.from_scene, "deg": f.deg.tolist(), "centre_deg": f.centre_deg.tolist(),
+                      "corner_share": CORNER,
+                      "points": [{"name": n, "tangent": p.tolist(), "design_cd_m2": float(v)}
+                                 for (n, _, _), p, v in zip(FIELD_POINTS, self.field_points, self.design_cd_m2,
+                                                            strict=True)]},
+            "grid": {"right_mm": [float(self.right_mm[0]), float(self.right_mm[-1])],
+                     "up_mm": [float(self.up_mm[0]), float(self.up_mm[-1])],
+                     "step_mm": self.step_mm,
+                     "offsets": int(self.right_mm.size * self.up_mm.size)},
+            "figures": self.figures(),
+        }
+
+
+def check_scan(half_mm, step_mm, field_deg, threshold):
+    """Raise :class:`ScanArgumentError` naming the argument (half_mm, step_mm, field_deg, threshold)
+    that is out of its range."""
+    half = np.asarray(half_mm, dtype=np.float64)
+    if half.shape != (2,) or not np.all(np.isfinite(half)) or np.any(half < 0) or np.any(half > 1000):
+        raise ScanArgumentError("half_mm", f"two half-widths in [0, 1000] mm, got {half_mm}")
+    if not (math.isfinite(step_mm) and 0 < step_mm <= 1000):
+        raise ScanArgumentError("step_mm", f"must be a finite step in (0, 1000] mm, got {step_mm}")
+    n = math.prod(2 * math.floor(h / step_mm + 1e-9) + 1 for h in half)
+    if n == 1:  # the design eye alone: an eyebox of 0 x 0 mm, whatever the optics
+        if not np.any(half > 0):
+            raise ScanArgumentError("half_mm", "both half-widths are 0: the scan would hold the design eye alone")
+        raise ScanArgumentError("step_mm", f"{step_mm:g} mm is longer than both half-widths (+-{half[0]:g} x "
+                                           f"+-{half[1]:g} mm): the scan would hold the design eye alone")
+    if n > MAX_OFFSETS:
+        raise ScanArgumentError("step_mm", f"{step_mm:g} mm over +-{half[0]:g} x +-{half[1]:g} mm makes {n} eye "
+                                           f"offsets, more than {MAX_OFFSETS}")
+    if field_deg is not None:
+        f = np.asarray(field_deg, dtype=np.float64)
+        if f.shape != (2,) or not np.all(np.isfinite(f)) or np.any(f <= 0) or np.any(f >= 180):
+            raise ScanArgumentError("field_deg", f"two angles in (0, 180) deg, got {field_deg}")
+    if not (math.isfinite(threshold) and 0 < threshold <= 1):
+        raise ScanArgumentError("threshold", f"must lie in (0, 1], got {threshold}")
+
+
+def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_deg=None, threshold: float = 0.5,
+                progress=None) -> EyeboxResult:
+    """Scan the eyebox of ``world``'s scene (see the module docstring).
+
+    half_mm: (right, up) half-widths of the grid of eye offsets, mm; step_mm: its step, mm (the
+    offsets are multiples of it, the design eye among them). field_deg: (full width, full height)
+    of the display field, deg, centred on the gaze; None finds it from the scene
+    (:func:`display_field`; :class:`FieldNotFound` where it cannot be found). threshold: the share
+    of the design-eye luminance every field point must keep inside the eyebox. ``progress``
+    (fraction, message), if given, is called after every row of the grid.
+
+    The scan runs on a world of its own, the scene with every LCD cell clear (:func:`clear_lcd`);
+    the given world is used for its scene only. Raises :class:`ScanArgumentError` naming an argument
+    out of its range before tracing anything.
+    """
+    check_scan(half_mm, step_mm, field_deg, threshold)
+    scene = world.scene
+    if any(o.material.type == "lcd" for o in scene.objects):
+        world = World(clear_lcd(scene))
+    fld = display_field(world) if field_deg is None else Field.given(field_deg)
+    eye = world.eye
+    tangents = fld.points()
+    directions = eye.gaze + tangents[:, :1] * eye.right + tangents[:, 1:] * eye.up  # (5, 3)
+    dist = eye.accommodation
+    points = eye.position + dist * directions if math.isfinite(dist) else None
+    xs, zs = offsets_mm(half_mm[0], step_mm), offsets_mm(half_mm[1], step_mm)
+    n = len(FIELD_POINTS)
+    lum = np.zeros((len(zs), len(xs), n))
+    through = np.zeros_like(lum)
+    coarse = np.zeros_like(lum)
+    blockers: dict[str, set] = {}
+    for j, z in enumerate(zs):
+        for i, x in enumerate(xs):
+            # The moved eye's rays are given directions: it needs no retina (1 x 1 spares the pixel table).
+            moved = dataclasses.replace(eye.spec, position=eye.position + x * eye.right + z * eye.up, resolution=(1, 1))
+            d = points - moved.position if points is not None else directions
+            res = specular_paths(world.with_eye(moved), directions=d, environment=False)
+            lum[j, i], _, through[j, i], coarse[j, i] = _per_pixel(res["paths"], n)
+            for k, v in res["specular_blockers"].items():
+                blockers.setdefault(k, set()).update(v)
+        if progress is not None:
+            progress((j + 1) / len(zs), f"eyebox: {(j + 1) * len(xs)} of {len(zs) * len(xs)} eye offsets")
+    design = lum[int(np.argmin(np.abs(zs))), int(np.argmin(np.abs(xs)))].copy()
+    result = EyeboxResult(scene.name, xs, zs, float(step_mm), fld, float(threshold), lum, through, design, True, [],
+                          {k: sorted(v) for k, v in sorted(blockers.items())}, coarse)
+    result.reasons = _reasons(result)
+    result.valid = not result.reasons
+    return result
+
+
+def _reasons(r: EyeboxResult) -> list[str]:
+    """Why the analysis cannot predict ``r``'s scene (empty when it can)."""
+    reasons = []
+    lum, through = r.luminance_cd_m2, r.through_specular_cd_m2
+    unfollowed = through > SPECULAR_SHARE * (lum + through)
+    if unfollowed.any():
+        lit = ", ".join(f"{s} (through {', '.join(b)})" for s, b in r.specular_blockers.items())
+        j, i = r.design_index
+        reasons.append(f"scattering surfaces are lit through specular optics the analysis does not follow: {lit}; at "
+                       f"{int(unfollowed.any(axis=2).sum())} of {unfollowed.shape[0] * unfollowed.shape[1]} eye "
+                       f"offsets; at the design eye direct light would add {through[j, i].max():.4g} cd/m^2 to the "
+                       f"{lum[j, i][np.argmax(through[j, i])]:.4g} predicted")
+    if r.coarse_cd_m2 is not None:
+        rough = r.coarse_cd_m2 > SPECULAR_SHARE * lum
+        if rough.any():
+            reasons.append(f"lights lie closer to the scattering surfaces than the analysis' quadrature resolves (a "
+                           f"backlight right behind a screen), at {int(rough.any(axis=2).sum())} of "
+                           f"{rough.shape[0] * rough.shape[1]} eye offsets: the predicted luminances are not reliable")
+    dark = [name for (name, _, _), v in zip(FIELD_POINTS, r.design_cd_m2, strict=True) if v <= 0]
+    if dark and not reasons:  # (dark because of the optics not followed, the reason above says)
+        reasons.append(f"the analysis predicts no light at the design eye for the field point(s) {', '.join(dark)}: "
+                       "the field is larger than the display, or the display is lit in a way the analysis does not "
+                       "follow")
+    return reasons
+
+
+# -- outputs ------------------------------------------------------------------------------------------
+def csv_text(result: EyeboxResult) -> str:
+    """eyebox.csv: a header, then one row per eye offset (rows of the grid from the bottom, offsets
+    right within a row): right_mm, up_mm, each field point's luminance (cd/m^2), inside (1 where
+    every field point is at or above the threshold times its design value, else 0). Numbers are
+    written in their shortest form that reads back exactly."""
+    names = [f"{n.replace(' ', '_')}_cd_m2" for n, _, _ in FIELD_POINTS]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["right_mm", "up_mm", *names, "inside"])
+    inside = result.inside
+    for j, z in enumerate(result.up_mm):
+        for i, x in enumerate(result.right_mm):
+            w.writerow([repr(float(x)), repr(float(z)), *(repr(float(v)) for v in result.luminance_cd_m2[j, i]),
+                        int(inside[j, i])])
+    return buf.getvalue()
+
+
+def read_csv(path) -> dict:
+    """eyebox.csv read back: {"right_mm" (nx,), "up_mm" (ny,), "luminance_cd_m2" (ny, nx, 5),
+    "inside" (ny, nx) bool}."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    head, body = rows[0], np.array(rows[1:], dtype=np.float64)
+    if len(head) != 3 + len(FIELD_POINTS) or head[:2] != ["right_mm", "up_mm"] or head[-1] != "inside":
+        raise ValueError(f"{path}: not an eyebox.csv (header {head})")
+    xs, zs = np.unique(body[:, 0]), np.unique(body[:, 1])
+    shape = (len(zs), len(xs))
+    return {"right_mm": xs, "up_mm": zs, "luminance_cd_m2": body[:, 2:-1].reshape(*shape, len(FIELD_POINTS)),
+            "inside": body[:, -1].reshape(shape).astype(bool)}
+
+
+def _csv_file(result: EyeboxResult, name: str = "eyebox.csv") -> OutputFile:
+    text = csv_text(result)
+
+    def check(p):
+        back = read_csv(p)
+        if not np.array_equal(back["luminance_cd_m2"], result.luminance_cd_m2):
+            raise ValueError("the luminances read back differ from those written")
+
+    def write(p):
+        with open(p, "w", newline="") as fh:
+            fh.write(text)
+
+    return OutputFile(name, write, check)
+
+
+def write_csv(result: EyeboxResult, path) -> None:
+    """Write :func:`csv_text` to ``path`` as a set (:func:`tracer.products.falsecolour.write_as_set`)."""
+    f = _csv_file(result)
+    write_as_set(path, f.write, f.check)
+
+
+def _caption(result: EyeboxResult) -> str:
+    fig = result.figures()
+    if fig is not None:
+        return (f"eyebox {fig['width_mm']:.0f} x {fig['height_mm']:.0f} mm: every field point >= "
+                f"{100 * result.threshold:.3g} % of design")
+    if result.reasons[0].startswith("scattering"):
+        return "not valid: the display is lit through optics the analysis does not follow"
+    return "not valid: no light at the design eye"
+
+
+def eyebox_chart(result: EyeboxResult, scale: int = 2) -> np.ndarray:
+    """The eyebox chart, (H, W, 3) uint8 sRGB: a heat map over the grid of eye offsets of the least
+    relative luminance (:attr:`EyeboxResult.relative`, in % of design) through the colour map of
+    :mod:`tracer.products.falsecolour` (black where nothing can be compared: a result that is not valid), the
+    eyebox's outline and the design eye's cross in red, the axes in mm (right and up from the
+    design eye), the colour bar with the threshold among its ticks, and a caption with the eyebox's
+    width and height (or why there is none). ``scale``: font pixels per glyph pixel."""
+    s = scale
+    rel = result.relative
+    ny, nx = rel.shape
+    cell = max(4, min(48, 480 // nx, 320 // ny)) * s // 2
+    map_h, map_w = ny * cell, nx * cell
+    top_of_scale = max(1.0, math.ceil(10 * np.nanmax(rel)) / 10) if np.isfinite(rel).any() else 1.0
+    heat = colour_map(np.nan_to_num(rel, nan=0.0) / top_of_scale)
+    heat[~np.isfinite(rel)] = (0, 0, 0)
+    heat = np.repeat(np.repeat(heat[::-1], cell, axis=0), cell, axis=1)  # row 0: the highest offset
+    # The eyebox's outline: its border pixels, lw thick, inside it; the design eye's cross.
+    lw = max(2, cell // 8)
+    region = np.repeat(np.repeat(result.region[::-1], cell, axis=0), cell, axis=1)
+    core = region
+    for _ in range(lw):
+        core = erode(core)
+    heat[region & ~core] = OUTLINE
+    j0, i0 = result.design_index
+    cy, cx = (ny - 1 - j0) * cell + cell // 2, i0 * cell + cell // 2
+    arm = max(3, cell // 2)
+    heat[cy - lw // 2:cy + (lw + 1) // 2, max(cx - arm, 0):cx + arm + 1] = OUTLINE
+    heat[max(cy - arm, 0):cy + arm + 1, cx - lw // 2:cx + (lw + 1) // 2] = OUTLINE
+
+    # Layout: caption band; the up axis' title, its labels, the map, the legend; the right axis below.
+    text_h = text_size("0", s)[0]
+    up_ = (GLYPH_H * s) // 2  # rows of a label above the row it is centred on
+    margin, tick = 3 * s, 2 * s
+    caption = _caption(result)
+    xlab = [f"{v:g}" for v in result.right_mm]
+    zlab = [f"{v:g}" for v in result.up_mm]
+    left = margin + text_h + 2 * s + max(text_size(t, s)[1] for t in zlab) + s + tick
+    space_above, space_below = legend_space(s)
+    caption_h = margin + text_h + s
+    top = caption_h + max(margin, space_above)
+    height = top + map_h + max(tick + s + 2 * text_h + 2 * s + margin, space_below)
+    ticks = [(v / top_of_scale, f"{round(100 * v)}") for v in np.arange(0, top_of_scale + 1e-9, 0.25)]
+    if all(abs(t * top_of_scale - result.threshold) > 1e-9 for t, _ in ticks):
+        ticks.append((result.threshold / top_of_scale, f"{100 * result.threshold:.3g}"))
+    panel, _ = colour_legend(height, top, top + map_h, ticks, "% design", s)
+    width = max(left + map_w + 2 * s + panel.shape[1], margin + text_size(caption, s)[1] + margin)
+    canvas = np.empty((height, width, 3), np.uint8)
+    canvas[:] = PAPER
+    canvas[top:top + map_h, left:left + map_w] = heat
+    canvas[:, left + map_w + 2 * s:left + map_w + 2 * s + panel.shape[1]] = panel
+    draw_text(canvas, caption, margin, margin + up_, s)
+    # Axes: a tick and a label every k offsets from the design eye, k the fewest that keeps labels apart.
+    kx = math.ceil((max(text_size(t, s)[1] for t in xlab) + 3 * s) / cell)
+    for i in np.flatnonzero((np.arange(nx) - i0) % kx == 0):
+        c = left + i * cell + cell // 2
+        canvas[top + map_h:top + map_h + tick, c - s // 2:c + (s + 1) // 2] = INK
+        draw_text(canvas, xlab[i], c, top + map_h + tick + s + up_, s, anchor="centre")
+    kz = math.ceil((text_h + s) / cell)
+    for j in np.flatnonzero((np.arange(ny) - j0) % kz == 0):
+        r = top + (ny - 1 - j) * cell + cell // 2
+        canvas[r - s // 2:r + (s + 1) // 2, left - tick:left] = INK
+        draw_text(canvas, zlab[j], left - tick - s, r, s, anchor="right")
+    draw_text(canvas, "right (mm)", left + map_w // 2, top + map_h + tick + s + text_h + 2 * s + up_, s,
+              anchor="centre")
+    strip = np.empty((text_h, text_size("up (mm)", s)[1], 3), np.uint8)  # the up axis' title, turned
+    strip[:] = PAPER
+    draw_text(strip, "up (mm)", 0, up_, s)
+    turned = np.rot90(strip)
+    r0 = max(top + map_h // 2 - turned.shape[0] // 2, 0)
+    r1 = min(r0 + turned.shape[0], height)
+    canvas[r0:r1, margin:margin + text_h] = turned[:r1 - r0]
+    return canvas
+
+
+def output_files(result: EyeboxResult) -> list[OutputFile]:
+    """eyebox.csv, eyebox.png and eyebox.json, each with its read-back check (:mod:`tracer.products.outputs`)."""
+    summary = result.summary()
+    text = finite_json(summary, "eyebox.json")
+
+    def check_json(p):
+        if json.loads(p.read_text()) != json.loads(text):
+            raise ValueError("the JSON read back differs from what was written")
+
+    return [_csv_file(result), png_file("eyebox.png", eyebox_chart(result)),
+            OutputFile("eyebox.json", lambda p: p.write_text(text), check_json)]
