@@ -86,7 +86,8 @@ from tracer.core.imageio import read_image
 from tracer.core.units import luminance
 from tracer.optics.materials import MATERIALS
 from tracer.scene import Scene, SceneObject
-from tracer.sources.environment import EnvironmentWithSun, HdriEnvironment, UniformEnvironment
+from tracer.sources.environment import HdriEnvironment, UniformEnvironment
+from tracer.sources.sun import EnvironmentWithSun
 
 _LLVM = os.environ.get("DRJIT_LIBLLVM_PATH", "")
 #: The Mitsuba variant in use (see the module docstring).
@@ -441,7 +442,7 @@ def _shapes(obj: SceneObject) -> dict:
 
 def environment(scene: Scene) -> dict | None:
     """The Mitsuba emitter dict of the scene's environment, or None (module docstring). A sun (a disk of
-    finite size, tracer.sources.environment.EnvironmentWithSun) has no Mitsuba counterpart here: refused."""
+    finite size, tracer.sources.sun.EnvironmentWithSun) has no Mitsuba counterpart here: refused."""
     env = scene.environment
     if isinstance(env, EnvironmentWithSun):
         raise NotImplementedError(f"{scene.name}: the Mitsuba peer does not convert the environment's sun (a disk "

@@ -34,9 +34,11 @@ from test_photon import _screen  # noqa: E402
 from test_transport import _ring_under_a_smoothed_dome  # noqa: E402
 
 from presets import PRESETS  # noqa: E402
+from tracer.analysis.aims import aim_preflight  # noqa: E402
+from tracer.analysis.brightness import brightness_theorem  # noqa: E402
 from tracer.core.units import Y_WEIGHTS  # noqa: E402
 from tracer.methods import INTEGRATORS, Budget  # noqa: E402
-from tracer.products.render import aim_preflight, brightness_theorem, render_scene  # noqa: E402
+from tracer.products.render import render_scene  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.transport import chains as analysis  # noqa: E402
 from tracer.transport import path  # noqa: E402

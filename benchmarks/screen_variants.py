@@ -27,8 +27,8 @@ from presets import PRESETS  # noqa: E402
 from tracer.core.imageio import read_exr_channels, write_png  # noqa: E402
 from tracer.core.units import luminance  # noqa: E402
 from tracer.methods import Budget  # noqa: E402
-from tracer.products.render import adaptation_luminance, render_folder  # noqa: E402
-from tracer.products.tonemap import tonemap_ward  # noqa: E402
+from tracer.products.render import render_folder  # noqa: E402
+from tracer.products.tonemap import adaptation_luminance, tonemap_ward  # noqa: E402
 
 VARIANTS = (("hud-screen-ideal-lcd", "(a) LCD of absolute contrast"), ("hud-screen", "(b) LCD 300:1"))
 #: The log view spans this many decades below the symbols' luminance.

@@ -8,7 +8,7 @@ disables it at exit, so the bpy module does not hang), the file is opened, its H
 overridden where options are given, and Blender's own render pipeline runs (the same path as F12).
 DIR receives image.exr (multilayer: Combined, the luminance pass Y and its standard error Y_noise,
 cd/m^2, with the hud:* header fields of the command line's image.exr), report.json (the command
-line's report, tracer.products.render.build_report, with the .blend's path) and falsecolour.png (Y in false
+line's report, tracer.products.report.build_report, with the .blend's path) and falsecolour.png (Y in false
 colour, logarithmic, with a legend in cd/m^2: tracer.products.falsecolour), written as a set (tracer.products.outputs,
 as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
@@ -101,7 +101,7 @@ def _render(args, blend: Path, outputs) -> int:
     from tracer.core.imageio import read_exr_channels
     from tracer.products.falsecolour import png_file
     from tracer.products.outputs import OutputFile, OutputWriteError
-    from tracer.products.render import finite_json
+    from tracer.products.report import finite_json
 
     tmp = Path(tempfile.mkdtemp(prefix="hud-render-"))
     atexit.register(shutil.rmtree, tmp, ignore_errors=True)

@@ -10,9 +10,9 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import ANALYSER, LEGACY_EMITTER, load_scene
+from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
 from . import schema_ui
 from .units import unit_mm
@@ -142,7 +142,7 @@ def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]
     raw_methods = dict(sc.raw.get("methods", {}))
     raw_methods |= {name: sc.raw[name] for name in ("forward", "backward") if name in sc.raw}
     for name, block in raw_methods.items():
-        schema_ui.apply(scene.hud, INTEGRATORS[name].options, block, f"{name}_", (), Path(sc.root), by_name)
+        schema_ui.apply(scene.hud, METHOD_OPTIONS[name].fields, block, f"{name}_", (), Path(sc.root), by_name)
     scene.hud.polarisation = sc.polarisation
     _build_eye(sc.eye, sc.raw["eye"], scene, coll, unit)
     _build_world(sc, scene)

@@ -9,7 +9,7 @@ ray batches). The Render Result gets Combined (apparent luminance, cd/m^2, linea
 (cd/m^2) and Y_noise (the standard error of Y, cd/m^2), with the hybrid method one RGB pass per
 channel (HUD, Environment: Combined is their sum), and the same hud:* fields as the command
 line's image.exr as stamp data (written into the EXR Blender saves). The command line's report
-(tracer.products.render.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
+(tracer.products.report.build_report) is kept in :data:`LAST_RENDER` and per scene in :data:`REPORTS`, for
 hud-render's report.json and the HUD Readouts panel, with the false-colour view of Y
 (tracer.products.falsecolour) in :data:`FALSE_COLOUR`. When Blender writes the render to a file (F12 with
 write_still, an animation, ``blender -b -a``), the false-colour view and the report are written beside
@@ -27,12 +27,14 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from ..tracer.analysis.aims import aim_preflight
 from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerError
 from ..tracer.core.units import Y_WEIGHTS
 from ..tracer.core.validate import WorkersError, check_workers
 from ..tracer.methods import INTEGRATORS, Budget
 from ..tracer.products.falsecolour import false_colour, png_file, write_as_set
-from ..tracer.products.render import aim_preflight, finite_json, render_products, run_render
+from ..tracer.products.render import render_products, run_render
+from ..tracer.products.report import finite_json
 from ..tracer.scene import load_scene
 from ..tracer.transport.world import World
 from .export import blender_terms, export_scene, generated_image_warnings
@@ -54,7 +56,7 @@ def passes_of(method: str) -> dict:
 UNITS = ("Combined (R,G,B), Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
          "Y_noise: standard error of Y, cd/m^2; HUD, Environment (hybrid method): each channel's R,G,B, cd/m^2")
 
-#: The report of the last final render (tracer.products.render.build_report, as the command line writes it),
+#: The report of the last final render (tracer.products.report.build_report, as the command line writes it),
 #: or {"error": message} when it failed. Read by hud-render for its report.json.
 LAST_RENDER: dict = {}
 #: The last report of each scene by name: what the HUD Readouts panel shows.

@@ -31,12 +31,12 @@ import numpy as np
 
 from ..presets._build import write_obj
 from ..tracer.core.imageio import write_exr
-from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.products.outputs import replace_folder
 from ..tracer.scene import ANALYSER
-from ..tracer.sources.environment import SUN_MAX_ANGULAR_DIAMETER_DEG
+from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
+from ..tracer.sources.sun import SUN_MAX_ANGULAR_DIAMETER_DEG
 from . import schema_ui
 from .units import unit_mm
 
@@ -238,9 +238,9 @@ def emission_spec(obj) -> dict | None:
 def methods_spec(scene) -> dict:
     """Every method's options from the render settings (the folder renders the same with any method)."""
     out = {}
-    for name, cls in INTEGRATORS.items():
+    for name, options in METHOD_OPTIONS.items():
         try:
-            out[name] = schema_ui.export(scene.hud, cls.options, f"{name}_")
+            out[name] = schema_ui.export(scene.hud, options.fields, f"{name}_")
         except ValueError as e:  # where the panel shows it
             raise ValueError(f"Render Properties > HUD Tracer > {name.capitalize()} options > {e}") from None
     return out
@@ -708,7 +708,7 @@ def blender_terms(error, folder: Path, scene) -> str:
     elif field.startswith("methods."):
         method, _, option = field[len("methods."):].partition(".")
         where = f"Render Properties > HUD Tracer > {method.capitalize()} options"
-        fields = INTEGRATORS[method].options if method in INTEGRATORS else ()
+        fields = METHOD_OPTIONS[method].fields if method in METHOD_OPTIONS else ()
         for key in filter(None, option.split(".")):  # the panel's labels, down nested groups (exit pupil)
             f = next((f for f in fields if f.name == key.split("[")[0]), None)
             where += f" > {f.label or key if f is not None else key}"

@@ -20,8 +20,9 @@ from ..tracer.core.schema import check_consistent
 from ..tracer.methods import DEFAULT_METHOD, INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.scene import ANALYSER, POLARISATION_MODES
-from ..tracer.sources.environment import SUN_ILLUMINANCE_LX
+from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
+from ..tracer.sources.sun import SUN_ILLUMINANCE_LX
 from .schema_ui import annotations
 from .units import angle_twin, length_twin
 
@@ -115,8 +116,8 @@ def _scene_annotations() -> dict:
                                         description="Where eyebox.csv, eyebox.png and eyebox.json are written "
                                                     "(// is the .blend's folder)"),
     }
-    for name, cls in INTEGRATORS.items():
-        annotations(cls.options, f"{name}_", seen=ann)
+    for name, options in METHOD_OPTIONS.items():
+        annotations(options.fields, f"{name}_", seen=ann)
     return ann
 
 

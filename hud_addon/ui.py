@@ -4,12 +4,12 @@ import math
 
 import bpy
 
-from ..tracer.analysis.hud import readouts
-from ..tracer.methods import INTEGRATORS
 from ..tracer.optics.materials import MATERIALS
+from ..tracer.products.report import readouts
 from ..tracer.scene import ANALYSER
-from ..tracer.sources.environment import Sun
+from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
+from ..tracer.sources.sun import Sun
 from . import engine, operators, schema_ui
 
 ENGINE = "HUD_TRACER"
@@ -37,10 +37,10 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         col.prop(s, "seconds" if s.budget == "SECONDS" else "rays")
         col.prop(s, "seed")
         col.prop(s, "polarisation")
-        if s.method in INTEGRATORS:
+        if s.method in METHOD_OPTIONS:
             box = col.box()
             box.label(text=f"{s.method.capitalize()} options")
-            schema_ui.draw(box, s, INTEGRATORS[s.method].options, f"{s.method}_")
+            schema_ui.draw(box, s, METHOD_OPTIONS[s.method].fields, f"{s.method}_")
         if s.method == "forward" and not _aimed(context.scene):
             box = col.box()
             for line in ("Forward tracing reaches the eye's pupil only by chance:",

@@ -1,4 +1,4 @@
-"""The brightness-theorem analysis in report.json (tracer.transport.chains, tracer.products.render.brightness_theorem):
+"""The brightness-theorem analysis in report.json (tracer.transport.chains, tracer.analysis.brightness):
 its prediction integrates over the pupil, says when its assumptions fail, predicts only what the
 method renders, and its breakdown by path sums to its total."""
 
@@ -13,9 +13,10 @@ import pytest
 from conftest import edit_json, render, t_bound, z_bound
 
 from presets._build import SceneBuilder, box, disk, frame_matrix, rectangle, write_obj
+from tracer.analysis.brightness import brightness_theorem
 from tracer.core.units import Y_WEIGHTS
 from tracer.methods import INTEGRATORS, Budget
-from tracer.products.render import brightness_theorem, render_scene
+from tracer.products.render import render_scene
 from tracer.scene import load_scene
 from tracer.transport.world import World
 
@@ -162,7 +163,7 @@ def test_an_aim_that_misses_light_is_told_before_the_first_ray(preset, tmp_path)
     for the methods whose particles follow the aims (forward, photon); the command line prints it
     before its progress bar. Backward tracing, whose eye paths do not use the emitters' aims, is told
     nothing."""
-    from tracer.products.render import AIM_COVERAGE, aim_preflight
+    from tracer.analysis.aims import AIM_COVERAGE, aim_preflight
 
     folder = _mirror_behind_glass(preset)
     world = World(load_scene(folder))
@@ -185,7 +186,7 @@ def test_every_presets_aims_cover_the_light_that_reaches_the_eye(tmp_path):
     field, 99.8 % for analytic-mirror's 64-gon pupil image, 100 % elsewhere), above the line from which
     the particle methods warn of an aim."""
     from presets import PRESETS
-    from tracer.products.render import AIM_COVERAGE, aim_preflight
+    from tracer.analysis.aims import AIM_COVERAGE, aim_preflight
 
     seen = 0
     for name, module in PRESETS.items():
@@ -370,10 +371,10 @@ def test_the_environment_lights_scattering_surfaces_in_the_prediction(tmp_path):
 
 
 def test_readouts_give_the_reports_figures(preset, tmp_path):
-    """The HUD Readouts panel's rows (tracer.analysis.hud.readouts) state the report's own numbers."""
-    from tracer.analysis.hud import readouts
+    """The HUD Readouts panel's rows (tracer.products.report.readouts) state the report's own numbers."""
     from tracer.methods import Budget
     from tracer.products.render import render_scene
+    from tracer.products.report import readouts
     from tracer.scene import load_scene
 
     report, _ = render_scene(load_scene(preset("hud-direct")), "backward", Budget(rays=2_000_000), 3, tmp_path / "o")

@@ -629,7 +629,8 @@ def test_a_sun_light_exports_as_the_environments_sun(tmp_path):
     np.testing.assert_allclose(sun2["direction"], res["directions"]["frame2"], atol=1e-6)
     assert res["spec_direct"]["direction"] == pytest.approx(sun1["direction"], abs=1e-6)
     from tracer.scene import load_scene
-    from tracer.sources.environment import EnvironmentWithSun, HdriEnvironment
+    from tracer.sources.environment import HdriEnvironment
+    from tracer.sources.sun import EnvironmentWithSun
 
     sc = load_scene(tmp_path / "frame1")
     assert isinstance(sc.environment, EnvironmentWithSun)

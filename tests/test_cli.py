@@ -267,8 +267,8 @@ def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tm
 def test_readouts_prints_the_reports_figures(tmp_path):
     """hud-trace readouts DIR prints one row per figure of the report (the add-on's HUD Readouts); a file
     that is not a report gives one line and exit 2."""
-    from tracer.analysis.hud import readouts
     from tracer.cli import main
+    from tracer.products.report import readouts
 
     out = tmp_path / "r"
     assert main(["render", "analytic-mirror", "--rays", "300000", "--seed", "2", "--out", str(out), "--quiet"]) == 0

@@ -19,18 +19,17 @@ from conftest import z_bound
 from tracer.core.errors import SceneError
 from tracer.core.imageio import write_exr
 from tracer.core.units import luminance
+from tracer.scene.environment import environment_from_spec
 from tracer.sources.environment import (
     CALIBRATION_MODES,
-    EnvironmentWithSun,
     HdriEnvironment,
     NoEnvironment,
-    Sun,
     UniformEnvironment,
     direction_to_equirect,
-    environment_from_spec,
     equirect_to_direction,
     row_solid_angle_fractions,
 )
+from tracer.sources.sun import EnvironmentWithSun, Sun
 
 
 def _uniform_sphere(n: int, seed: int) -> np.ndarray:

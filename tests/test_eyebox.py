@@ -12,9 +12,9 @@ import pytest
 from conftest import ROOT
 
 from presets._build import SceneBuilder, frame_bars, frame_matrix, rectangle
+from tracer.analysis.brightness import brightness_theorem
 from tracer.core.imageio import read_image, write_png
 from tracer.products.falsecolour import colour_map
-from tracer.products.render import brightness_theorem
 from tracer.scans.eyebox import (
     FIELD_POINTS,
     OUTLINE,
@@ -127,7 +127,7 @@ def test_the_eyebox_of_a_framed_lcd_follows_from_similar_triangles(framed, tmp_p
 
 
 def test_the_design_eye_value_is_the_brightness_theorems_prediction(framed):
-    """tracer.products.render.brightness_theorem predicts the clear cells ("symbol") at L R T over the pupil;
+    """tracer.analysis.brightness.brightness_theorem predicts the clear cells ("symbol") at L R T over the pupil;
     the scan, which clears every cell, reads the same at the design eye for every field point
     (the black band at the centre of the slide included)."""
     _, world, r = framed

@@ -12,7 +12,7 @@ from tracer.core.units import luminance
 from tracer.methods import INTEGRATORS, Budget
 from tracer.methods.hybrid import applicable, combined_image, relative_variances
 from tracer.optics.pupil import pupil_diameter_mm
-from tracer.products.render import adaptation_luminance
+from tracer.products.tonemap import adaptation_luminance
 from tracer.runtime.parallel import films_match, render_parallel
 from tracer.scene import load_scene
 from tracer.transport.world import World

@@ -1,4 +1,4 @@
-"""The sun of an environment (tracer.sources.environment.Sun, EnvironmentWithSun): its sampling against its
+"""The sun of an environment (tracer.sources.sun: Sun, EnvironmentWithSun): its sampling against its
 density by chi-square (the sun a small part of the power, and nearly all of it), the mixture's
 estimate of the power, and renders against closed forms: a Lambertian floor lit by the sun reads
 rho E sin(h) / pi (0 with the sun below its horizon), and a sun in direct view shows its luminance
@@ -15,14 +15,13 @@ from presets._build import SceneBuilder, rectangle
 from tracer.core.sampling import make_rng
 from tracer.core.units import luminance3
 from tracer.sources.environment import (
-    EnvironmentWithSun,
     HdriEnvironment,
     NoEnvironment,
-    Sun,
     UniformEnvironment,
     direction_to_equirect,
     equirect_to_direction,
 )
+from tracer.sources.sun import EnvironmentWithSun, Sun
 
 #: Sidak family of the chi-square tests in this module.
 CHI2_TESTS = 5

@@ -21,7 +21,8 @@ from presets import analytic_mirror
 from tracer import cli
 from tracer.core.imageio import read_image
 from tracer.methods import INTEGRATORS, Budget
-from tracer.products.render import REPORT_SECTIONS, render_folder
+from tracer.products.render import render_folder
+from tracer.products.report import REPORT_SECTIONS
 from tracer.scans.sweep import (
     MAX_RUNS,
     SHADE,

@@ -12,7 +12,7 @@ Exit status of ``render`` (each states what is on disk afterwards):
 - 130: interrupted (Ctrl-C, SIGTERM or SIGHUP): the batches merged so far are written as a set,
   marked ``"partial": true``.
 
-``readouts`` prints the figures of a render's report.json (tracer.analysis.hud.readouts, what the Blender
+``readouts`` prints the figures of a render's report.json (tracer.products.report.readouts, what the Blender
 add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one line).
 
 ``false-colour`` writes the false-colour view of an image.exr (tracer.products.falsecolour) to one PNG file:
@@ -281,7 +281,7 @@ def cmd_methods(args) -> int:
 def cmd_readouts(args) -> int:
     import json
 
-    from .analysis.hud import readouts
+    from .products.report import readouts
 
     path = Path(args.report)
     if path.is_dir():

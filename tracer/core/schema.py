@@ -18,6 +18,11 @@ Kinds (JSON value -> parsed value):
 - ``"image"``: a path relative to the scene folder -> float64 array (H, W, 3) in [0, 1], decoded with the
   sibling field ``<name>_encoding`` when the schema has one (the path is kept as ``<name>_file``);
 - ``"group"``: a nested block of ``fields`` (optional as a whole when its default is ``None``).
+
+Kinds of the scene format's own blocks (tracer.scene.format), which the scene loader reads itself:
+``"vector3"`` ([x, y, z]), ``"int2"`` (two integers), ``"matrix4"`` (four rows of four numbers) and
+``"list"`` (a list of blocks). A number field may also take one of its ``keywords`` (the pupil's
+``"auto"``, the accommodation's ``"infinity"``).
 """
 
 from __future__ import annotations
@@ -35,7 +40,8 @@ from .validate import FieldChecker
 #: Default of a field that must be given.
 REQUIRED = object()
 
-KINDS = ("number", "int", "rgb", "pair", "vector2", "bool", "choice", "string", "object_ref", "image", "group")
+KINDS = ("number", "int", "rgb", "pair", "vector2", "bool", "choice", "string", "object_ref", "image", "group",
+         "vector3", "int2", "matrix4", "list")
 
 
 @dataclass(frozen=True)
@@ -57,6 +63,8 @@ class Field:
     alternatives : for a ``group``, sets of its fields of which exactly one set must be given
         (see :class:`Schema`).
     ui_default : the value a user interface starts from when there is no default (JSON form).
+    keywords : strings a number field also takes in place of a number (each with its meaning in
+        ``description``).
     """
 
     name: str
@@ -72,6 +80,7 @@ class Field:
     fields: tuple[Field, ...] = ()
     alternatives: tuple[tuple[str, ...], ...] = ()
     ui_default: object = None
+    keywords: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -177,6 +186,17 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
     if k == "group":
         return parse_block(ck, value, fld, f.fields, root, alternatives=f.alternatives)
     raise AssertionError(k)
+
+
+def number_field(ck: FieldChecker, f: Field, spec: dict, block: str):
+    """The number of field ``f`` in the JSON block ``spec`` (its default where absent), checked against
+    the field's range; a keyword of the field (``f.keywords``) is returned as given. ``block`` is the
+    block's own path, for the error message."""
+    value = spec.get(f.name, f.default)
+    if isinstance(value, str) and value in f.keywords:
+        return value
+    return ck.number(value, f"{block}.{f.name}" if block else f.name, min_value=f.minimum,
+                     min_exclusive=f.exclusive_min, max_value=f.maximum)
 
 
 def parse_block(ck: FieldChecker, spec, fld: str, fields: tuple[Field, ...], root: Path | None = None,

@@ -28,18 +28,16 @@ w / (1 - w).
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
 from ..core.sampling import uniform_disk_concentric
-from ..core.schema import Field
 from ..core.units import luminance3
 from ..core.vec import F32, dot, put, take
 from ..optics.bsdf import RADIANCE, REFLECTION, TRANSMISSION
 from ..transport.path import PathMethod, PathState, Shadow, continue_by_sampling, segment_to, trace
-from .base import MAX_DEPTH, WAVE, Integrator, register
+from .base import WAVE, Integrator, register
 
 #: Strata whose acceptance by rejection sampling would be below this are not worth stratifying.
 MIN_ACCEPTANCE = 1e-3
@@ -60,20 +58,6 @@ def circle_overlap_area(r1: float, r2: float, d: float) -> float:
     a2 = r2 * r2 * math.acos((d * d + r2 * r2 - r1 * r1) / (2 * d * r2))
     k = 0.5 * math.sqrt((-d + r1 + r2) * (d + r1 - r2) * (d - r1 + r2) * (d + r1 + r2))
     return a1 + a2 - k
-
-
-EXIT_PUPIL = Field(
-    "exit_pupil", "group", None, label="Exit pupil",
-    description="Eq. (3) strata: a disk in the pupil plane that receives a share of the samples",
-    fields=(Field("object", "object_ref", None, label="Object",
-                  description="An object whose outline, projected along the gaze, is the exit pupil"),
-            Field("center_mm", "vector2", None, unit="mm", minimum=-1e4, maximum=1e4, label="Centre",
-                  description="Centre of the exit pupil in eye coordinates (right, up), mm"),
-            Field("radius_mm", "number", None, unit="mm", minimum=0.0, exclusive_min=True, maximum=1e4, label="Radius",
-                  description="Radius of the exit pupil, mm"),
-            Field("share", "number", unit="1", minimum=0.0, maximum=1.0, label="Share",
-                  description="Share of the samples sent into the exit pupil, below 1", ui_default=0.5)),
-    alternatives=(("object",), ("center_mm", "radius_mm")))
 
 
 #: The largest density (1/sr) the MIS weights use: its square stays finite in float64.
@@ -101,13 +85,6 @@ class BackwardTracer(Integrator, PathMethod):
     noise_advice = (", or use the forward method, which suits small sources that scattering surfaces see only "
                     "through lenses, mirrors or glass (next-event estimation cannot connect through them)")
     summary = "retina -> pupil -> optics -> sources, next-event estimation (paper sec. 2, eq. 3 strata)"
-    options = (MAX_DEPTH,
-               Field("next_event", "bool", True, label="Next-event estimation",
-                     description="Connect every non-specular vertex to the lights (off: the paper's plain method)"),
-               Field("splits", "int", 3, minimum=0, maximum=8, label="Specular splits",
-                     description="At the first N glass surfaces or coatings of a camera path, follow both the "
-                                 "reflected and the transmitted branch with their weights instead of choosing one"),
-               EXIT_PUPIL)
     components = {"hit": "samples per pixel", "connection": "samples per pixel"}
     mode = RADIANCE
     #: Connections share the light with the paths' own hits of it (multiple importance sampling); a
@@ -115,28 +92,6 @@ class BackwardTracer(Integrator, PathMethod):
     mis_with_hits = True
     efficiency_definition = "retina samples whose path reached a source or a lit environment / samples"
     found_what = "reached a source"
-
-    @classmethod
-    def check_options(cls, ck, opts, fld, scene):
-        ep = opts.get("exit_pupil")
-        if ep is None:
-            return
-        f = f"{fld}.exit_pupil"
-        if ep["share"] >= 1.0:
-            ck.fail(f"{f}.share", "must be < 1: the rest of the pupil keeps samples (unbiasedness)")
-        if "object" in ep:
-            matches = [o for o in scene.objects if o.name == ep["object"]]
-            if not matches:
-                ck.fail(f"{f}.object", f"no object named {json.dumps(ep['object'])}")
-            # Project the object's vertices along the gaze onto the pupil plane (eye coordinates).
-            eye = scene.eye
-            right = np.cross(eye.gaze, eye.up)
-            right /= np.linalg.norm(right)
-            upv = np.cross(right, eye.gaze)
-            rel = matches[0].vertices - eye.position
-            xy = np.stack([rel @ right, rel @ upv], axis=1)
-            center = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
-            ep["center_mm"], ep["radius_mm"] = center, float(np.linalg.norm(xy - center, axis=1).max())
 
     def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)

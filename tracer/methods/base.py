@@ -1,8 +1,9 @@
 """What every light-transport method shares: options, the budget, the batch driver, the report data.
 
-A method is a subclass of :class:`Integrator` registered by name (:func:`register`). It declares its
-scene.json options as a schema (``options``, validated by :meth:`Integrator.parse_options`, exposed by
-the Blender add-on), its film components, and traces one batch at a time on the path loop
+A method is a subclass of :class:`Integrator` registered by name (:func:`register`); its scene.json
+options are :data:`tracer.scene.methods.METHOD_OPTIONS` under the same name (the scene loader validates
+them, the Blender add-on draws them). It declares its film components and traces one batch at a time
+on the path loop
 (:mod:`tracer.transport.path`) over a render world (:class:`tracer.transport.world.World`).
 
 Batches are seed-addressed: batch k draws its random numbers from ``make_rng(seed, k)`` only and
@@ -24,9 +25,8 @@ import numpy as np
 
 from ..core.film import Film, Splats
 from ..core.sampling import make_rng
-from ..core.schema import Field, parse_block
 from ..core.units import luminance
-from ..core.validate import FieldChecker
+from ..scene.methods import MAX_DEPTH
 from ..transport.path import CUT_KEY, PROBE_DEPTH, PROBE_KEY, STILL_KEY, Context, Roulette, Timers
 from ..transport.world import World
 
@@ -64,10 +64,6 @@ Preview = Callable[[Film], None]
 #: A ``preview`` callable is given the merged film at most this often (seconds of wall time), so that
 #: showing it costs a small share of the render.
 PREVIEW_SECONDS = 1.0
-
-#: The option every method has.
-MAX_DEPTH = Field("max_depth", "int", 32, minimum=1, maximum=1000, label="Max depth",
-                  description="Longest path in ray segments; paths cut there are counted and reported")
 
 
 @dataclass
@@ -146,8 +142,8 @@ def register(cls):
 
 
 class Integrator:
-    """Base of all methods. Subclasses set ``name``, ``summary``, ``options``, ``components`` and
-    implement :meth:`run_batch`.
+    """Base of all methods. Subclasses set ``name``, ``summary``, ``components`` and implement
+    :meth:`run_batch`; their options are the scene's (``METHOD_OPTIONS[name]``).
 
     Parameters
     ----------
@@ -158,8 +154,6 @@ class Integrator:
 
     name = ""
     summary = ""
-    #: scene.json options of the method (tracer.core.schema fields), under "methods.<name>".
-    options: tuple[Field, ...] = (MAX_DEPTH,)
     #: Film components: name -> what normalises it.
     components: dict[str, str] = {}
     #: What "efficiency" counts, for the report.
@@ -200,19 +194,6 @@ class Integrator:
         self.warnings.append(message)
         if self.notice is not None:
             self.notice(message)
-
-    # -- options ---------------------------------------------------------------------------------
-    @classmethod
-    def parse_options(cls, ck: FieldChecker, block, fld: str, scene) -> dict:
-        """Validate the method's scene.json block (None: all defaults); subclasses add checks that
-        need the scene (objects, eye) in :meth:`check_options`."""
-        opts = parse_block(ck, block, fld, cls.options, scene.root)
-        cls.check_options(ck, opts, fld, scene)
-        return opts
-
-    @classmethod
-    def check_options(cls, ck: FieldChecker, opts: dict, fld: str, scene):
-        """Checks across options or against the scene; may derive values (default: none)."""
 
     # -- the batch -------------------------------------------------------------------------------
     def run_batch(self, ctx: Context) -> tuple[int, int, dict[str, int], int]:

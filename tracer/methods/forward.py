@@ -21,7 +21,7 @@ from ..core.vec import F32, take
 from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..transport.path import PathMethod, PathState, continue_by_sampling, trace
-from .base import MAX_DEPTH, WAVE, Integrator, register
+from .base import WAVE, Integrator, register
 
 #: Replicates per batch: particles are dealt round-robin into this many groups (tracer.core.film).
 REPLICATES = 8
@@ -77,7 +77,6 @@ class ForwardTracer(Integrator, PathMethod):
                     "surface sees directly")
     renders_environment = False
     summary = "sources -> optics -> pupil -> retina (paper sec. 2, directed split)"
-    options = (MAX_DEPTH,)
     components = {"light": "particles emitted"}
     mode = IMPORTANCE
     efficiency_definition = "particles that reached the retina / particles emitted"

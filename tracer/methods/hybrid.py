@@ -60,8 +60,9 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.film import Film
-from ..core.schema import Field
 from ..core.units import luminance
+from ..scene.methods import CANDIDATES
+from ..transport.chains import specular_paths
 from ..transport.path import CUT_KEY, PROBE_KEY, STILL_KEY
 from .base import (
     BATCH_SHARE_OF_TIME,
@@ -76,8 +77,6 @@ from .base import (
     register,
 )
 
-#: The methods a channel may be given, in the order the pilots try them.
-CANDIDATES = ("backward", "forward", "photon")
 #: Paths per pilot batch (a backward batch covers every pixel a whole number of times).
 PILOT_BATCH = 1 << 14
 #: A pilot runs at least this many batches and until its film holds this many replicates.
@@ -164,8 +163,6 @@ class Channel:
 
 def applicable(world, lights: bool, environment: bool) -> dict[str, str | None]:
     """{method: None where it applies to a channel of ``world`` keeping these sources, else why not}."""
-    from ..transport.chains import specular_paths
-
     out: dict[str, str | None] = {"backward": None}
     lit_env = environment and not world.environment.is_black
     if not lights or len(world.lights) == 0:
@@ -274,8 +271,6 @@ def run_pilot(integrator: Integrator, method: str, seconds: float | None, rays: 
 class _Channels(Integrator):
     """An image made of channels (module docstring); subclasses say which (:meth:`_channels`)."""
 
-    options = (Field("pilot_share", "number", 0.1, unit="1", minimum=0.01, maximum=0.5, label="Pilot share",
-                     description="Share of the budget spent on the pilots that choose the methods"),)
     efficiency_definition = "paths that found light / paths, over every channel"
     found_what = "found light in any channel"
 
@@ -523,11 +518,6 @@ class HybridTracer(_Channels):
     name = "hybrid"
     summary = ("channels by source (the HUD's emitters, the environment), each rendered by the method that suits it, "
                "chosen by pilots, summed into one image (paper sec. 4.2)")
-    options = (Field("hud_method", "choice", "auto", choices=("auto",) + CANDIDATES, label="HUD channel",
-                     description="Method of the channel of light from the scene's emitters (auto: chosen by pilots)"),
-               Field("environment_method", "choice", "auto", choices=("auto", "backward"), label="Environment channel",
-                     description="Method of the channel of light from the environment (auto: chosen by pilots)"),
-               ) + _Channels.options
     components = {}
 
     def _channels(self) -> list[Channel]:

@@ -46,7 +46,6 @@ import math
 import numpy as np
 
 from ..core.film import Splats
-from ..core.schema import Field
 from ..core.units import luminance3
 from ..core.vec import F32, dot, take
 from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
@@ -64,7 +63,7 @@ from ..transport.path import (
     trace,
 )
 from .backward import BackwardTracer
-from .base import DEFAULT_BATCH, MAX_DEPTH, WAVE, register
+from .base import DEFAULT_BATCH, WAVE, register
 from .forward import Particles
 
 #: Independent replicates per batch: eye passes over all pixels, each with its own share of photons.
@@ -240,18 +239,6 @@ class PhotonTracer(BackwardTracer):
                "(paper sec. 4.1, progressive radius)")
     noise_advice = (", or raise methods.photon.radius_mm (less noise, more blur); where no scattering surface is "
                     "in view, use the forward or backward method")
-    options = (MAX_DEPTH,
-               Field("next_event", "bool", True, label="Next-event estimation",
-                     description="Connect visibility points to the lights they see directly (off: photons carry "
-                                 "the direct light too)"),
-               Field("splits", "int", 3, minimum=0, maximum=8, label="Specular splits",
-                     description="At the first N glass surfaces or coatings of an eye path, follow both branches"),
-               Field("radius_mm", "number", 0.0, unit="mm", minimum=0.0, maximum=1e4, label="Initial radius",
-                     description="Gather radius of the first batch, mm; 0: automatic (1.5 pixel footprints on the "
-                                 "surface in view)"),
-               Field("alpha", "number", 2.0 / 3.0, unit="1", minimum=0.0, exclusive_min=True, maximum=1.0,
-                     label="Radius reduction",
-                     description="Knaus-Zwicker alpha: the radius^2 shrinks as batches^(alpha - 1); 1 keeps it"))
     components = {"hit": "samples per pixel", "connection": "samples per pixel", "photon": "samples per pixel"}
     #: A visibility point's direct light is the connection and one sample of the surface's own law
     #: (:meth:`_direct_by_sampling`), weighted by the power heuristic.

@@ -147,3 +147,15 @@ def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float =
         ),
     }
     return png, info
+
+
+def adaptation_luminance(y: np.ndarray, mode: str = "log_average") -> float:
+    """The luminance (cd/m^2) the eye adapts to, over the pixels that receive light: their log-average
+    (``mode`` "log_average", Ward 1994 and Reinhard et al. 2002, eq. 1) or their arithmetic mean
+    ("mean", the "average luminance" of the paper, sec. 4.1). Pixels that receive none (no environment,
+    nothing in view) are left out: an eye looking at a HUD in the dark adapts to what it sees, not to
+    an infinitely dark void. The log-average weighs a bright sun or HUD symbol less than the mean."""
+    lit = y > 1e-9 * max(float(y.max()), 1e-300)
+    if mode == "mean":
+        return float(y[lit].mean()) if lit.any() else 0.0
+    return log_average_luminance(y[lit]) if lit.any() else log_average_luminance(y)

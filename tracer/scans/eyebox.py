@@ -21,7 +21,7 @@ The analysis follows light that reaches scattering surfaces directly from the em
 scattering surface is lit through specular optics (hud-screen's rear-projection screen behind its
 projection lens, hud-direct-condenser's scatterer behind a condenser) it cannot predict the
 display, and the result says so (``valid`` false, ``reasons``), as
-:func:`tracer.products.render.brightness_theorem` does for its sections.
+:func:`tracer.analysis.brightness.brightness_theorem` does for its sections.
 
 Outputs (:func:`output_files`): eyebox.csv (one row per offset), eyebox.png (:func:`eyebox_chart`)
 and eyebox.json (:meth:`EyeboxResult.summary`), written as a set (:mod:`tracer.products.outputs`).
@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..analysis.brightness import SPECULAR_SHARE, per_pixel
 from ..analysis.hud import erode
 from ..products.falsecolour import (
     GLYPH_H,
@@ -52,7 +53,7 @@ from ..products.falsecolour import (
     write_as_set,
 )
 from ..products.outputs import OutputFile
-from ..products.render import SPECULAR_SHARE, _per_pixel, finite_json
+from ..products.report import finite_json
 from ..scene import Scene
 from ..transport.chains import specular_paths
 from ..transport.world import World
@@ -388,7 +389,7 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
             moved = dataclasses.replace(eye.spec, position=eye.position + x * eye.right + z * eye.up, resolution=(1, 1))
             d = points - moved.position if points is not None else directions
             res = specular_paths(world.with_eye(moved), directions=d, environment=False)
-            lum[j, i], _, through[j, i], coarse[j, i] = _per_pixel(res["paths"], n)
+            lum[j, i], _, through[j, i], coarse[j, i] = per_pixel(res["paths"], n)
             for k, v in res["specular_blockers"].items():
                 blockers.setdefault(k, set()).update(v)
         if progress is not None:

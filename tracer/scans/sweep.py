@@ -3,7 +3,7 @@
 The paper's practical question (Potemin, Zhdanov et al., Proc. SPIE 10690, 106900I (2018), sec. 4.1):
 the LED luminance at which the symbols stay legible while the rear-projection spot stays invisible
 against the environment. A sweep renders a scene once per point of a grid of scene.json values,
-reads each run's report (:func:`tracer.products.render.build_report`, its HUD figures from
+reads each run's report (:func:`tracer.products.report.build_report`, its HUD figures from
 :mod:`tracer.analysis.hud`) and says where every requirement holds.
 
 - **Fields** (:func:`parse_field`): a dotted path into scene.json, ``eye.pupil_diameter_mm``,
@@ -70,7 +70,8 @@ from .. import __version__
 from ..core.errors import SceneError, StoppedBeforeFirstBatch
 from ..products.falsecolour import FONT, GLYPH_H, INK, PAPER, colour_map, draw_text, png_file, text_size, value_label
 from ..products.outputs import STAGING_PREFIX, OutputFile, OutputFolderError, OutputSet, OutputWriteError
-from ..products.render import REPORT_SECTIONS, finite_json, render_scene
+from ..products.render import render_scene
+from ..products.report import REPORT_SECTIONS, finite_json
 from ..scene import SCENE_FILE, Scene, load_scene
 from ..sources.lights import EMISSION
 
@@ -390,7 +391,7 @@ class Requirement:
 
 
 def check_report_key(argument: str, steps) -> None:
-    """A report key's first name must be a section of every report (tracer.products.render.REPORT_SECTIONS), so
+    """A report key's first name must be a section of every report (tracer.products.report.REPORT_SECTIONS), so
     that a mistyped key is refused before the runs rather than found missing in each. (What lies below
     a section depends on the scene and the method: a run whose report lacks it fails the requirement.)
     Raises :class:`SweepArgumentError`."""

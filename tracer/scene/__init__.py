@@ -1,19 +1,10 @@
 """Layer 4, the scene format: the one seam between Blender (or a preset) and the tracer. The add-on
-exports it, presets write it, the tracer reads it (docs/scene-format.md, generated from its schemas)."""
+exports it, presets write it, the tracer reads it. Its blocks and fields are :mod:`.format` (with
+:mod:`.methods` for the methods' options); docs/scene-format.md is generated from them."""
 
-from .load import (
-    ANALYSER,
-    LEGACY_EMITTER,
-    MESH_SUFFIXES,
-    POLARISATION_MODES,
-    SCENE_FILE,
-    Aim,
-    EyeSpec,
-    Material,
-    Scene,
-    SceneObject,
-    load_scene,
-)
+from .format import ANALYSER, LEGACY_EMITTER, MESH_SUFFIXES, POLARISATION_MODES, SCENE_FILE
+from .load import load_scene
+from .model import Aim, EyeSpec, Material, Scene, SceneObject
 
 __all__ = ["ANALYSER", "LEGACY_EMITTER", "MESH_SUFFIXES", "POLARISATION_MODES", "SCENE_FILE", "Aim", "EyeSpec",
            "Material", "Scene", "SceneObject", "load_scene"]

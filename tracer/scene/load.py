@@ -1,59 +1,7 @@
-"""The scene format: the one seam between Blender (or a preset) and the tracer.
-
-A scene is a folder::
-
-    scene.json          the description below (format "hud-scene", version 1)
-    meshes/...          PLY, OBJ or GLB meshes, read with trimesh (OBJ keeps texture coordinates)
-    textures/...        LCD slides and HDRI panoramas, read with OpenImageIO
-
-Units: millimetres for every length and position, cd/m^2 for luminance, lm for flux, degrees
-for angles (the names say so: ``pupil_diameter_mm``, ``fov_deg``). World axes: z is up.
-
-scene.json, version 1::
-
-    {
-      "format": "hud-scene", "version": 1, "name": "...", "description": "...",
-      "eye": {"position": [x, y, z], "gaze": [..], "up": [..],
-              "pupil_diameter_mm": 4.0,           # or "auto": Watson & Yellott 2012 from
-              "adaptation_luminance_cd_m2": 300,  # this, or "image": what the eye sees (a pilot render
-                                                  # finds it); default: the environment's mean luminance
-              "adaptation": "log_average",        # or "mean": how the image gives the adaptation luminance
-              "observer_age": 30, "focal_length_mm": 16.67,
-              "accommodation_distance_mm": 2500.0,           # or "infinity"
-              "resolution": [W, H], "fov_deg": [horizontal, vertical]},
-      "environment": {"type": "none" | "uniform" | "hdri", ...,    # see tracer.sources.environment
-                      "sun": {"direction": [x, y, z], "illuminance_lux": 1e5, "angular_diameter_deg": 0.53}},
-      "objects": [
-        {"name": "mirror", "mesh": "meshes/mirror.obj",
-         "transform": {"matrix": [[4 x 4]]} | {"translate": [..], "rotate_deg": [x, y, z], "scale": [..]},
-         "smooth_normals": true,
-         "material": {"type": "mirror", "reflectance": 0.9}},
-        {"name": "led", "mesh": "meshes/led.obj", "material": {"type": "absorber"},
-         "emission": {"luminance": 1e9, "aim": {"target": "scatterer", "share": 0.95}}}
-      ],
-      "methods": {"backward": {"max_depth": 32, "next_event": true,
-                               "exit_pupil": {"object": "name" | "center_mm": [x, y], "radius_mm": r, "share": 0.5}},
-                  "forward": {"max_depth": 32}}
-    }
-
-Materials (``material.type``) and their fields are the schemas of :mod:`tracer.optics.materials`;
-the emission block is :data:`tracer.sources.lights.EMISSION` (any material can emit). The material type
-``emitter`` of earlier files is short for an absorber with an emission block of the same fields.
-A scattering material and an emission may carry
-``"aim": {"target": "eye" | "<object name>", "share": w, "mode": "toward" | "away"}``: the paper's
-directed split (sec. 2), used by the forward method, and ``"light_aim"`` of the same form: the
-aperture through which the surface's light arrives (a condenser's face), toward which backward eye
-paths draw a share of their directions (the same one-sample mixture, unbiased for every share). An
-object of type ``aperture`` is not traced:
-it is a virtual surface that names where an optical system's pupil is, for aiming and for the
-backward eq. (3) strata.
-
-Method options live under ``methods``, one block per method, each validated by its method's own
-option schema (``Integrator.options``), so a new method adds options without touching this loader.
-Top-level ``forward`` and ``backward`` blocks of earlier files are read as ``methods.forward`` and
-``methods.backward``.
-
-Every error raises :class:`tracer.core.errors.SceneError` naming the file and the JSON field.
+"""Reading a scene folder: scene.json checked block by block against the format
+(:mod:`tracer.scene.format`; docs/scene-format.md), the meshes and images it names loaded, and the
+result built as plain data (:mod:`tracer.scene.model`). Every error raises
+:class:`tracer.core.errors.SceneError` naming the file and the JSON field.
 """
 
 from __future__ import annotations
@@ -61,26 +9,19 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import SceneError
-from ..core.schema import Field, fail_in, parse_block
+from ..core.schema import fail_in, number_field, parse_block
 from ..core.validate import (
     BYTES_PER_PIXEL,
     MAX_COORD_MM,
-    MAX_DISTANCE_MM,
-    MAX_FOCAL_MM,
     MAX_LUMINANCE,
     MAX_PIXELS,
-    MAX_PUPIL_MM,
     MAX_SCALE,
-    MIN_DISTANCE_MM,
     MIN_LUMINANCE,
-    MIN_PUPIL_MM,
     MIN_SCALE,
     FieldChecker,
     parse_json,
@@ -88,178 +29,29 @@ from ..core.validate import (
 )
 from ..optics.materials import MATERIALS
 from ..optics.pupil import pupil_diameter_mm
-from ..sources.environment import Environment, environment_from_spec
-from ..sources.lights import EMISSION, Emission, make_emission
+from ..sources.environment import Environment
+from ..sources.lights import EMISSION, make_emission
+from .environment import environment_from_spec
+from .format import (
+    AIM,
+    ANALYSER,
+    EYE,
+    FORMAT,
+    LEGACY_EMITTER,
+    OBJECT,
+    POLARISATION_MODES,
+    SCENE_FILE,
+    TOP,
+    TRANSFORM_MATRIX,
+    TRANSFORM_PARTS,
+    VERSION,
+)
+from .meshes import check_closed_outward, load_mesh
+from .methods import parse_methods
+from .model import Aim, EyeSpec, Material, Scene, SceneObject
 
-FORMAT = "hud-scene"
-VERSION = 1
-SCENE_FILE = "scene.json"
-
-#: The legacy material type that stands for an absorber with an emission block.
-LEGACY_EMITTER = "emitter"
-
-
-@dataclass
-class Aim:
-    """The paper's directed split (sec. 2): with probability ``share`` a direction is drawn
-    toward ``target`` ("eye" or the name of an object), otherwise from the surface's own law.
-
-    ``mode`` "toward" aims at the target; "away" draws directions as if they came from it: the
-    target is then a virtual image behind the surface (an optical system's pupil imaged back).
-    """
-
-    target: str
-    share: float
-    mode: str = "toward"
-
-
-@dataclass
-class Material:
-    """An optical material with validated parameters (RGB values as float64 arrays (3,))."""
-
-    type: str
-    params: dict
-    aim: Aim | None = None
-    #: Guidance of eye paths (backward tracing): a share of the directions drawn toward the aperture
-    #: through which the surface's light arrives ("light_aim").
-    light_aim: Aim | None = None
-
-
-@dataclass
-class SceneObject:
-    """One object: a triangle mesh in world millimetres, its material and, if it emits, its emission.
-
-    Attributes
-    ----------
-    index : position in scene.json's object list; it is also the object's ``slot`` in a render world.
-    vertices : (v, 3) float64, mm, world space.
-    faces : (f, 3) int64.
-    normals : (v, 3) float64 unit vertex normals when ``smooth`` else None.
-    uv : (v, 2) float64 texture coordinates or None.
-    local_x : (3,) the object's local x axis in the world (anisotropic lobes follow it).
-    local_y : (3,) its local y axis, made perpendicular to local_x (polariser and retarder axes are
-    angles from local_x toward local_y).
-    """
-
-    name: str
-    index: int
-    vertices: np.ndarray
-    faces: np.ndarray
-    material: Material
-    smooth: bool = False
-    normals: np.ndarray | None = None
-    uv: np.ndarray | None = None
-    local_x: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
-    emission: Emission | None = None
-    local_y: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
-
-    def axis(self, angle_deg: float) -> np.ndarray:
-        """(3,) unit vector at ``angle_deg`` from the local x axis toward the local y axis (the axis of a
-        polariser, a retarder film or a polarised emitter on this object)."""
-        a = np.radians(angle_deg)
-        return np.cos(a) * self.local_x + np.sin(a) * self.local_y
-
-    @property
-    def slot(self) -> int:
-        return self.index
-
-    @property
-    def triangles(self) -> np.ndarray:
-        """(f, 3, 3) float64 triangle corners, mm."""
-        return self.vertices[self.faces]
-
-    @property
-    def area_mm2(self) -> float:
-        t = self.triangles
-        return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
-
-
-#: How the adaptation luminance follows from an image (EyeSpec.adaptation).
-ADAPTATION_MODES = ("log_average", "mean")
 #: The pupil's first guess when it follows the image and the environment is black: a lit interior, cd/m^2.
 FIRST_GUESS_CD_M2 = 100.0
-
-
-#: The eye's optional analyser, ``eye.analyser``: polarised sunglasses (a linear polariser before the eye).
-ANALYSER = Field(
-    "analyser", "group", None, label="Analyser (polarised sunglasses)",
-    description="A linear polariser in front of the eye, as polarised sunglasses are",
-    fields=(Field("axis_deg", "number", 90.0, unit="deg", minimum=-360.0, maximum=360.0, label="Axis",
-                  description="Transmission axis, degrees from the eye's right toward its up (sunglasses: 90)"),
-            Field("transmittance_along", "number", 1.0, unit="1", minimum=0.0, maximum=1.0, label="Transmittance along",
-                  description="Transmittance for light polarised along the axis, 0..1"),
-            Field("transmittance_across", "number", 0.0, unit="1", minimum=0.0, maximum=1.0,
-                  label="Transmittance across", description="Transmittance for light polarised across the axis, 0..1")))
-
-#: ``polarisation`` at the top of scene.json: "auto" carries Stokes vectors where an element of the
-#: scene polarises (tracer.optics.polar); "off" uses the unpolarised Fresnel average at dielectrics
-#: (what an RGB renderer does) and refuses elements that only mean something with polarisation.
-POLARISATION_MODES = ("auto", "off")
-
-
-@dataclass
-class EyeSpec:
-    """The observer: a thin-lens eye (see :mod:`tracer.transport.eye`). Lengths in mm, angles in degrees."""
-
-    position: np.ndarray
-    gaze: np.ndarray
-    up: np.ndarray
-    pupil_diameter_mm: float
-    focal_length_mm: float
-    accommodation_distance_mm: float
-    resolution: tuple[int, int]
-    fov_deg: tuple[float, float]
-    #: How the adaptation luminance follows from the image the eye sees: "log_average" (Ward 1994's
-    #: log-average, the default) or "mean" (the arithmetic mean; the paper's "average luminance").
-    adaptation: str = "log_average"
-    #: The pupil follows the image's adaptation luminance (Watson & Yellott 2012; "auto" with
-    #: adaptation_luminance_cd_m2 "image"): a pilot render finds it (tracer.products.render.run_render).
-    pupil_from_image: bool = False
-    observer_age: float = 30.0
-    #: The analyser in front of the eye (:data:`ANALYSER`'s parsed fields), or None.
-    analyser: dict | None = None
-
-
-@dataclass
-class Scene:
-    """A loaded, validated scene."""
-
-    root: Path
-    name: str
-    description: str
-    eye: EyeSpec
-    environment: Environment
-    objects: list[SceneObject]
-    #: Validated options of each method named in scene.json (methods not named use their defaults).
-    methods: dict[str, dict]
-    scene_hash: str
-    raw: dict
-    file: str = SCENE_FILE
-    #: Whether the scene's files may lie outside its folder (load_scene's ``allow_external``): worker
-    #: processes load the folder again with the same rule.
-    allow_external: bool = False
-    #: :data:`POLARISATION_MODES`: "auto" (Stokes vectors where the scene polarises) or "off".
-    polarisation: str = "auto"
-
-    def object(self, name: str) -> SceneObject:
-        for obj in self.objects:
-            if obj.name == name:
-                return obj
-        raise KeyError(name)
-
-    @property
-    def traced_objects(self) -> list[SceneObject]:
-        """Objects that take part in ray intersection (virtual apertures do not)."""
-        return [o for o in self.objects if MATERIALS[o.material.type].traced]
-
-    def method_options(self, name: str) -> dict:
-        """The validated options of method ``name`` (its defaults when scene.json names none)."""
-        if name not in self.methods:
-            from ..methods import INTEGRATORS
-
-            self.methods[name] = INTEGRATORS[name].parse_options(FieldChecker(self.file), None,
-                                                                 f"methods.{name}", self)
-        return self.methods[name]
 
 
 def _rotation_xyz(deg: np.ndarray) -> np.ndarray:
@@ -277,28 +69,30 @@ def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
     An absent transform is the identity; a null one is refused (a null method block or analyser means "absent")."""
     ck.obj(spec, fld)
     if "matrix" in spec:
-        ck.keys(spec, fld, {"matrix"}, set())
+        ck.keys(spec, fld, *TRANSFORM_MATRIX.keys)
         rows = spec["matrix"]
         if not isinstance(rows, list) or len(rows) != 4:
             ck.fail(f"{fld}.matrix", "expected 4 rows of 4 numbers")
-        m = np.array([ck.vector(r, f"{fld}.matrix[{i}]", 4, MAX_COORD_MM) for i, r in enumerate(rows)])
+        limit = TRANSFORM_MATRIX.field("matrix").maximum
+        m = np.array([ck.vector(r, f"{fld}.matrix[{i}]", 4, limit) for i, r in enumerate(rows)])
         if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-9):
             ck.fail(f"{fld}.matrix[3]", "the last row must be [0, 0, 0, 1] (affine transforms only)")
         where = f"{fld}.matrix"
     else:
-        ck.keys(spec, fld, set(), {"translate", "rotate_deg", "scale"})
-        t = ck.position(spec.get("translate", [0, 0, 0]), f"{fld}.translate")
-        r = ck.vector(spec.get("rotate_deg", [0, 0, 0]), f"{fld}.rotate_deg", 3, 1e6)
-        s_raw = spec.get("scale", [1, 1, 1])
+        ck.keys(spec, fld, *TRANSFORM_PARTS.keys)
+        translate, rotate, scale = (TRANSFORM_PARTS.field(k) for k in ("translate", "rotate_deg", "scale"))
+        t = ck.vector(spec.get("translate", translate.default), f"{fld}.translate", 3, translate.maximum)
+        r = ck.vector(spec.get("rotate_deg", rotate.default), f"{fld}.rotate_deg", 3, rotate.maximum)
+        s_raw = spec.get("scale", scale.default)
         where = f"{fld}.scale"
         if isinstance(s_raw, list):
             s = ck.vector(s_raw, where)
         else:
             s = np.full(3, ck.number(s_raw, where))
         for i in range(3):
-            if not MIN_SCALE <= abs(s[i]) <= MAX_SCALE:
+            if not scale.minimum <= abs(s[i]) <= scale.maximum:
                 ck.fail(where if not isinstance(s_raw, list) else f"{where}[{i}]",
-                        f"must be {MIN_SCALE:g} to {MAX_SCALE:g} in magnitude, got {s[i]:g}")
+                        f"must be {scale.minimum:g} to {scale.maximum:g} in magnitude, got {s[i]:g}")
         m = np.eye(4)
         m[:3, :3] = _rotation_xyz(r) @ np.diag(s)
         m[:3, 3] = t
@@ -315,14 +109,15 @@ def _transform(ck: FieldChecker, spec, fld: str) -> np.ndarray:
 
 def _aim(ck: FieldChecker, spec, fld: str) -> Aim:
     ck.obj(spec, fld)
-    ck.keys(spec, fld, {"target"}, {"share", "mode"})
+    ck.keys(spec, fld, *AIM.keys)
     target = ck.string(spec["target"], f"{fld}.target")
-    share = ck.number(spec.get("share", 0.5), f"{fld}.share", min_value=0.0)
+    share = ck.number(spec.get("share", AIM.field("share").default), f"{fld}.share", min_value=0.0)
     if share >= 1.0:
         ck.fail(f"{fld}.share", "must be < 1 so that every direction keeps a non-zero probability (unbiasedness)")
-    mode = spec.get("mode", "toward")
-    if mode not in ("toward", "away"):
-        ck.fail(f"{fld}.mode", 'expected "toward" or "away"')
+    modes = AIM.field("mode")
+    mode = spec.get("mode", modes.default)
+    if mode not in modes.choices:
+        ck.fail(f"{fld}.mode", f"expected {' or '.join(json.dumps(c) for c in modes.choices)}")
     return Aim(target, share, mode)
 
 
@@ -357,116 +152,6 @@ def _emission(ck: FieldChecker, spec, fld: str) -> tuple[dict, Aim | None]:
     return params, (_aim(ck, spec["aim"], f"{fld}.aim") if "aim" in spec else None)
 
 
-#: An index 0 in an OBJ face (of a vertex, texture coordinate or normal): OBJ counts from 1 (and from -1
-#: backward), so 0 refers to nothing; trimesh would take it as the last element.
-_OBJ_ZERO_INDEX = re.compile(rb"(?m)^f[ \t][^\n]*?(?:(?<=[ \t])|/)0(?=[/ \t\r]|$)")
-
-
-def _check_obj_indices(ck: FieldChecker, path: Path, rel: str, fld: str):
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
-    bad = _OBJ_ZERO_INDEX.search(data)
-    if bad:
-        line = data.count(b"\n", 0, bad.start()) + 1
-        ck.fail(fld, f"cannot read mesh {rel}: line {line}: a face refers to element 0 (OBJ counts from 1)")
-
-
-#: The mesh formats scene.json may name (trimesh reads them; it also guesses at others, and reads a
-#: point cloud or a text file of numbers as a mesh of no faces or of garbage).
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
-
-
-def _load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
-    """(vertices (v,3), faces (f,3), uv (v,2) or None) from OBJ, PLY, STL, OFF or glTF through trimesh."""
-    import trimesh
-
-    path = ck.path(root, rel, fld)
-    try:
-        found = path.is_file()
-    except OSError as e:
-        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
-    if not found:
-        ck.fail(fld, f"mesh file not found: {rel}")
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        ck.fail(fld, f"{rel}: not a mesh format the tracer reads (a file name ending in "
-                     f"{', '.join(MESH_SUFFIXES)})")
-    if path.suffix.lower() == ".obj":
-        _check_obj_indices(ck, path, rel, fld)
-    try:
-        loaded = trimesh.load(str(path), process=False, maintain_order=True)
-        if isinstance(loaded, trimesh.Scene):
-            meshes = list(loaded.dump()) if hasattr(loaded, "dump") else list(loaded.geometry.values())
-            if not meshes:
-                ck.fail(fld, f"{rel} contains no triangles")
-            if len(meshes) > 1:
-                loaded = trimesh.util.concatenate(meshes)
-            else:
-                loaded = meshes[0]
-    except SceneError:
-        raise
-    except IndexError as e:  # trimesh indexing its vertices with a face's (0-based; an OBJ counts from 1)
-        found = re.search(r"index (-?\d+) is out of bounds for axis 0 with size (\d+)", str(e))
-        if found and int(found[1]) >= 0 and path.suffix.lower() == ".obj":
-            index, size = int(found[1]) + 1, int(found[2])
-            ck.fail(fld, f"cannot read mesh {rel}: a face refers to vertex {index}, but the file has {size} vertices")
-        ck.fail(fld, f"cannot read mesh {rel}: a face refers to a vertex the file does not have ({e})")
-    except Exception as e:  # trimesh raises many types on malformed files
-        ck.fail(fld, f"cannot read mesh {rel}: {e}")
-    v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
-    if len(v) == 0 or len(f) == 0:
-        ck.fail(fld, f"{rel} contains no triangles")
-    if v.ndim != 2 or v.shape[1] != 3:
-        ck.fail(fld, f"{rel}: every vertex needs three coordinates (x y z), the file gives "
-                     f"{v.shape[1] if v.ndim == 2 else 0}")
-    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
-        ck.fail(fld, f"{rel}: its faces must be triangles of the file's {len(v)} vertices")
-    if not np.all(np.isfinite(v)):
-        ck.fail(fld, f"{rel} has non-finite vertex coordinates")
-    uv = None
-    visual = getattr(loaded, "visual", None)
-    if visual is not None and getattr(visual, "kind", None) == "texture" and getattr(visual, "uv", None) is not None:
-        uv_arr = np.asarray(visual.uv, dtype=np.float64)
-        if uv_arr.shape == (len(v), 2):
-            if not np.all(np.isfinite(uv_arr)):
-                ck.fail(fld, f"{rel} has non-finite texture coordinates")
-            uv = uv_arr
-    return v, f, uv
-
-
-def _check_closed_outward(ck: FieldChecker, vw: np.ndarray, faces: np.ndarray, fld: str, rel: str):
-    """A dielectric bounds a volume of glass: its mesh must be closed (every edge shared by exactly two
-    triangles), consistently oriented (the two run their edge in opposite directions) and face outward
-    (a positive enclosed volume), or refraction would enter glass where there is none. Vertices at the
-    same position (to 1e-7 of the mesh's size) are merged first: exporters split them at seams."""
-    size = max(float(np.ptp(vw, axis=0).max()), 1e-300)
-    key = np.round(vw / (1e-7 * size)).astype(np.int64)
-    _, merged = np.unique(key, axis=0, return_inverse=True)
-    tri = merged.reshape(-1)[faces]
-    tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 2] != tri[:, 0])]
-    n = int(merged.max()) + 1
-    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
-    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
-    _, undirected_count = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_counts=True)
-    _, directed_count = np.unique(a * n + b, return_counts=True)
-    what = "a dielectric must be a closed surface with outward normals (it bounds the glass)"
-    if np.any(undirected_count == 1):
-        ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count == 1))} edges belong to one triangle only "
-                     "(the surface is open; model a thin sheet of glass as a box of its thickness)")
-    if np.any(undirected_count > 2):
-        ck.fail(fld, f"{rel}: {what}: {int(np.sum(undirected_count > 2))} edges belong to more than two triangles")
-    if np.any(directed_count > 1):
-        ck.fail(fld, f"{rel}: {what}: {int(np.sum(directed_count > 1))} edges are run the same way by both their "
-                     "triangles (the faces are not consistently oriented)")
-    v0, v1, v2 = (vw[faces[:, k]] for k in range(3))
-    volume = float(np.einsum("ij,ij->", v0, np.cross(v1 - v0, v2 - v0))) / 6.0
-    if volume <= 0:
-        ck.fail(fld, f"{rel}: {what}: the normals point inward (enclosed volume {volume:.4g} mm^3); reverse the "
-                     "faces' winding")
-
-
 def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
     """SHA-256 of scene.json and every file it references (first 16 hex digits)."""
     h = hashlib.sha256(raw_bytes)
@@ -483,7 +168,7 @@ def scene_hash(root: Path, raw_bytes: bytes, files: list[str]) -> str:
 def _polarisation(ck: FieldChecker, raw: dict, eye: EyeSpec, objects: list[SceneObject]) -> str:
     """The scene's polarisation mode, after checking what needs it: with "off", no element may be one
     that only polarisation can describe; LCD output polarisers are on every LCD or on none."""
-    mode = raw.get("polarisation", "auto")
+    mode = raw.get("polarisation", TOP.field("polarisation").default)
     if mode not in POLARISATION_MODES:
         ck.fail("polarisation", f"expected one of {', '.join(json.dumps(m) for m in POLARISATION_MODES)}, got "
                                 f"{json.dumps(mode)[:40]}")
@@ -518,19 +203,18 @@ def _polarisation(ck: FieldChecker, raw: dict, eye: EyeSpec, objects: list[Scene
 def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
     fld = "eye"
     ck.obj(spec, fld)
-    ck.keys(spec, fld, {"position", "gaze", "up", "pupil_diameter_mm", "resolution", "fov_deg"},
-            {"focal_length_mm", "accommodation_distance_mm", "adaptation_luminance_cd_m2", "observer_age",
-             "adaptation", "analyser"})
-    pos = ck.position(spec["position"], "eye.position")
+    ck.keys(spec, fld, *EYE.keys)
+    pos = ck.vector(spec["position"], "eye.position", 3, EYE.field("position").maximum)
     gaze = ck.unit_vector(spec["gaze"], "eye.gaze")
     up = ck.unit_vector(spec["up"], "eye.up")
     if np.linalg.norm(np.cross(gaze, up)) < 1e-6:
         ck.fail("eye.up", "must not be parallel to eye.gaze")
-    adaptation = spec.get("adaptation", "log_average")
-    if adaptation not in ADAPTATION_MODES:
-        ck.fail("eye.adaptation", f"expected one of {', '.join(json.dumps(m) for m in ADAPTATION_MODES)}, got "
+    modes = EYE.field("adaptation")
+    adaptation = spec.get("adaptation", modes.default)
+    if adaptation not in modes.choices:
+        ck.fail("eye.adaptation", f"expected one of {', '.join(json.dumps(m) for m in modes.choices)}, got "
                                   f"{json.dumps(adaptation)[:40]}")
-    age = ck.number(spec.get("observer_age", 30.0), "eye.observer_age", min_value=1.0, max_value=120.0)
+    age = number_field(ck, EYE.field("observer_age"), spec, fld)
     from_image = False
     if spec["pupil_diameter_mm"] == "auto":
         # Watson & Yellott (2012) for the adaptation luminance: given, the image's (a pilot finds it), or
@@ -540,7 +224,8 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
             from_image = True
             adapt = environment.mean_luminance if not environment.is_black else FIRST_GUESS_CD_M2
         elif given is not None:
-            adapt = ck.number(given, "eye.adaptation_luminance_cd_m2", min_value=0.0, max_value=MAX_LUMINANCE)
+            adapt = number_field(ck, EYE.field("adaptation_luminance_cd_m2"), {"adaptation_luminance_cd_m2": given},
+                                 fld)
         elif not environment.is_black:
             adapt = environment.mean_luminance
         else:
@@ -548,20 +233,17 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                                              'or a lit environment')
         pupil = pupil_diameter_mm(adapt, age_years=age)
     else:
-        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm", min_value=MIN_PUPIL_MM,
-                          max_value=MAX_PUPIL_MM)
-    focal = ck.number(spec.get("focal_length_mm", 16.67), "eye.focal_length_mm", min_value=0.0, min_exclusive=True,
-                      max_value=MAX_FOCAL_MM)
-    acc_raw = spec.get("accommodation_distance_mm", "infinity")
-    if acc_raw == "infinity":
-        acc = math.inf
-    else:
-        acc = ck.number(acc_raw, "eye.accommodation_distance_mm", min_value=MIN_DISTANCE_MM,
-                        max_value=MAX_DISTANCE_MM)
+        pupil = ck.number(spec["pupil_diameter_mm"], "eye.pupil_diameter_mm",
+                          min_value=EYE.field("pupil_diameter_mm").minimum,
+                          max_value=EYE.field("pupil_diameter_mm").maximum)
+    focal = number_field(ck, EYE.field("focal_length_mm"), spec, fld)
+    acc = number_field(ck, EYE.field("accommodation_distance_mm"), spec, fld)
+    acc = math.inf if acc == "infinity" else acc
     res = spec["resolution"]
+    most = EYE.field("resolution").maximum
     if (not isinstance(res, list) or len(res) != 2
-            or not all(isinstance(r, int) and not isinstance(r, bool) and 1 <= r <= 16384 for r in res)):
-        ck.fail("eye.resolution", f"expected [width, height], integers in 1..16384, got {json.dumps(res)[:80]}")
+            or not all(isinstance(r, int) and not isinstance(r, bool) and 1 <= r <= most for r in res)):
+        ck.fail("eye.resolution", f"expected [width, height], integers in 1..{most}, got {json.dumps(res)[:80]}")
     need = res[0] * res[1] * BYTES_PER_PIXEL
     memory = physical_memory_bytes()
     if res[0] * res[1] > MAX_PIXELS:
@@ -571,8 +253,9 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
         ck.fail("eye.resolution", f"{res[0]} x {res[1]} pixels need about {need / 2**30:.1f} GiB per process; this "
                                   f"machine has {memory / 2**30:.1f} GiB (the limit is half of it)")
     fov = ck.vector(spec["fov_deg"], "eye.fov_deg", 2)
-    if np.any(fov <= 0) or np.any(fov >= 170):
-        ck.fail("eye.fov_deg", f"each field angle must lie in (0, 170) degrees, got {fov[0]!r} x {fov[1]!r}")
+    widest = EYE.field("fov_deg").maximum
+    if np.any(fov <= 0) or np.any(fov >= widest):
+        ck.fail("eye.fov_deg", f"each field angle must lie in (0, {widest:g}) degrees, got {fov[0]!r} x {fov[1]!r}")
     analyser = None
     if spec.get("analyser") is not None:
         analyser = parse_block(ck, spec["analyser"], "eye.analyser", ANALYSER.fields)
@@ -581,26 +264,6 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                                     "light and every image would be black")
     return EyeSpec(pos, gaze, up, pupil, focal, acc, (res[0], res[1]), (float(fov[0]), float(fov[1])), adaptation,
                    from_image, age, analyser)
-
-
-def _methods(ck: FieldChecker, raw: dict, scene: Scene) -> dict[str, dict]:
-    """Validate the "methods" block (and the legacy top-level "forward"/"backward" blocks) with each
-    method's own option schema."""
-    from ..methods import INTEGRATORS
-
-    blocks = dict(ck.obj(raw["methods"], "methods")) if "methods" in raw else {}
-    fields = {name: f"methods.{name}" for name in blocks}
-    for legacy in ("forward", "backward"):
-        if legacy in raw:
-            if legacy in blocks:
-                ck.fail(legacy, f'give the options once, under "methods.{legacy}"')
-            blocks[legacy], fields[legacy] = raw[legacy], legacy
-    out = {}
-    for name, block in blocks.items():
-        if name not in INTEGRATORS:
-            ck.fail(fields[name], f"unknown method (known: {', '.join(INTEGRATORS)})")
-        out[name] = INTEGRATORS[name].parse_options(ck, block, fields[name], scene)
-    return out
 
 
 def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
@@ -631,8 +294,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     raw = parse_json(text, fname)
     ck = FieldChecker(fname, allow_external)
     ck.obj(raw, "")
-    ck.keys(raw, "", {"format", "version", "eye", "objects"},
-            {"name", "description", "environment", "methods", "backward", "forward", "polarisation"})
+    ck.keys(raw, "", *TOP.keys)
     if raw["format"] != FORMAT:
         ck.fail("format", f'expected "{FORMAT}", got {json.dumps(raw["format"])}')
     if type(raw["version"]) is not int or raw["version"] != VERSION:  # true and 1.0 equal 1 in Python
@@ -649,7 +311,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     for i, o in enumerate(objs_raw):
         fld = f"objects[{i}]"
         ck.obj(o, fld)
-        ck.keys(o, fld, {"name", "mesh", "material"}, {"transform", "smooth_normals", "emission"})
+        ck.keys(o, fld, *OBJECT.keys)
         name = ck.string(o["name"], f"{fld}.name")
         if name in names:
             ck.fail(f"{fld}.name", f"duplicate object name {json.dumps(name)}")
@@ -668,7 +330,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         rel = ck.string(o["mesh"], f"{fld}.mesh")
         files.append(rel)
         m = _transform(ck, o["transform"], f"{fld}.transform") if "transform" in o else np.eye(4)
-        v, f, uv = _load_mesh(ck, root, rel, f"{fld}.mesh")
+        v, f, uv = load_mesh(ck, root, rel, f"{fld}.mesh")
         if f.min() < 0 or f.max() >= len(v):
             ck.fail(f"{fld}.mesh", f"{rel}: face indices out of range")
         if np.abs(v).max() > MAX_COORD_MM:
@@ -693,7 +355,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             lengths = np.sqrt(vn[:, 0] * vn[:, 0] + vn[:, 1] * vn[:, 1] + vn[:, 2] * vn[:, 2])
             normals = np.divide(vn, lengths[:, None], out=np.zeros_like(vn), where=lengths[:, None] > 0)
         if mat.type == "dielectric":
-            _check_closed_outward(ck, vw, f, f"{fld}.mesh", rel)
+            check_closed_outward(ck, vw, f, f"{fld}.mesh", rel)
         if mat.type == "lcd" and uv is None:
             ck.fail(f"{fld}.mesh", f"{rel}: an LCD needs texture coordinates (an OBJ with vt lines)")
         lx = m[:3, :3] @ np.array([1.0, 0.0, 0.0])
@@ -746,5 +408,5 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         files.append(env_file)
     scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname,
                   allow_external, polarisation)
-    scene.methods = _methods(ck, raw, scene)
+    scene.methods = parse_methods(ck, raw, scene)
     return scene

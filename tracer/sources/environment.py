@@ -6,7 +6,7 @@ cd/m^2. World axes: z is up (as in Blender); directions are unit vectors.
 
 Three kinds exist: :class:`NoEnvironment` (black), :class:`UniformEnvironment` (the same
 luminance everywhere) and :class:`HdriEnvironment` (an equirectangular panorama, calibrated
-to a luminance). :func:`environment_from_spec` builds one from scene.json.
+to a luminance); :mod:`tracer.scene.environment` builds one from scene.json.
 
 Equirectangular convention (Blender's, so that the Blender add-on shows the same panorama as
 Blender's Environment Texture node): a direction d = (x, y, z) maps to
@@ -25,40 +25,27 @@ next-event estimation: ``sample(u)`` draws directions with a density ``pdf(d)`` 
 times sin(theta) of the continuous panorama), then a uniform direction inside the pixel (Pharr,
 Jakob and Humphreys, "Physically Based Rendering", 3rd ed., sec. 14.2.4, "Infinite area lights").
 
-A sun (:class:`Sun`: a uniform disk of a given illuminance and angular diameter) can be added to any of
-them (:class:`EnvironmentWithSun`); the sum is an environment like the others, so every method that
-reads, samples or weighs an environment sees the sun without knowing of it.
+A sun (:class:`tracer.sources.sun.Sun`: a uniform disk of a given illuminance and angular diameter)
+can be added to any of them (:class:`tracer.sources.sun.EnvironmentWithSun`); the sum is an environment
+like the others, so every method that reads, samples or weighs an environment sees the sun without
+knowing of it.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from abc import ABC, abstractmethod
-from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import ImageReadError, SceneError
-from ..core.imageio import read_image
-from ..core.sampling import Distribution1D, frame_from_normal, to_world, uniform_sphere
-from ..core.units import Y_WEIGHTS, luminance, normalize_color
-from ..core.validate import MAX_ABS, MAX_LUMINANCE, MIN_LUMINANCE, FieldChecker
-from ..core.vec import dot, norm
+from ..core.sampling import Distribution1D, uniform_sphere
+from ..core.units import luminance, normalize_color
 
 #: Calibration modes of :class:`HdriEnvironment`.
 CALIBRATION_MODES = ("scale", "mean", "max", "min")
 
-#: The sun's defaults: illuminance on a surface facing it, lx (a clear summer noon at sea level is
-#: about 1e5 lx); angular diameter, deg (the solar disk seen from the Earth: 0.524 to 0.542 over the
-#: year).
-SUN_ILLUMINANCE_LX = 100_000.0
-SUN_ANGULAR_DIAMETER_DEG = 0.53
-#: Largest angular diameter of a sun, deg (a disk beyond this is no longer a sun but a patch of sky).
-SUN_MAX_ANGULAR_DIAMETER_DEG = 20.0
 
-
-def _as_directions(d) -> np.ndarray:
+def as_directions(d) -> np.ndarray:
     """``d`` as a float64 array of shape (3, n) of finite values, or ``ValueError``."""
     d = np.asarray(d, dtype=np.float64)
     if d.ndim != 2 or d.shape[0] != 3:
@@ -83,7 +70,7 @@ def direction_to_equirect(d) -> tuple[np.ndarray, np.ndarray]:
     v : np.ndarray, shape (n,)
         Vertical coordinate in [0, 1], 1 at the top edge (image row 0, the +z pole).
     """
-    d = _as_directions(d)
+    d = as_directions(d)
     u = 0.5 - np.arctan2(d[1], d[0]) / (2.0 * np.pi)
     v = 0.5 + np.arctan2(d[2], np.hypot(d[0], d[1])) / np.pi
     return u, v
@@ -209,7 +196,7 @@ class NoEnvironment(Environment):
     """No environment: black in every direction."""
 
     def radiance(self, d) -> np.ndarray:
-        return np.zeros((3, _as_directions(d).shape[1]))
+        return np.zeros((3, as_directions(d).shape[1]))
 
     @property
     def mean_luminance(self) -> float:
@@ -246,7 +233,7 @@ class UniformEnvironment(Environment):
         self._rgb = self.luminance_cd_m2 * self.color
 
     def radiance(self, d) -> np.ndarray:
-        return np.repeat(self._rgb[:, None], _as_directions(d).shape[1], axis=1)
+        return np.repeat(self._rgb[:, None], as_directions(d).shape[1], axis=1)
 
     def sample(self, u):
         """Uniform directions on the sphere (density 1 / (4 pi))."""
@@ -398,7 +385,7 @@ class HdriEnvironment(Environment):
         return np.stack([x, y, d[2]])
 
     def radiance(self, d) -> np.ndarray:
-        u, v = direction_to_equirect(self._to_image(_as_directions(d)))
+        u, v = direction_to_equirect(self._to_image(as_directions(d)))
         return self._k * _bilinear(self._image, u, v)
 
     def sample(self, u):
@@ -428,7 +415,7 @@ class HdriEnvironment(Environment):
         if dist is None:
             return np.zeros(np.shape(d)[1])
         h, w = self._image.shape[:2]
-        u, v = direction_to_equirect(self._to_image(_as_directions(d)))
+        u, v = direction_to_equirect(self._to_image(as_directions(d)))
         column = np.clip(np.floor(u * w).astype(np.int64), 0, w - 1)
         row = np.clip(np.floor((1.0 - v) * h).astype(np.int64), 0, h - 1)
         return dist.pmf(row * w + column) / omega[row]
@@ -450,310 +437,3 @@ class HdriEnvironment(Environment):
         """Smallest pixel luminance, cd/m^2 (the measure of the "min" calibration; also the
         smallest radiance returned)."""
         return self._min
-
-
-class Sun(Environment):
-    """The sun: a disk of uniform luminance, infinitely far, of a given illuminance and size.
-
-    A disk of angular radius delta and luminance L lights a surface that faces it with the
-    illuminance E = integral over the cone of L cos(theta) d omega = 2 pi L integral_0^delta
-    cos(theta) sin(theta) d theta = pi L sin^2(delta) (the view factor sin^2(delta) of a coaxial
-    disk from a point: Howell, "A Catalog of Radiation Heat Transfer Configuration Factors", factor
-    B-13; Modest, "Radiative Heat Transfer", 3rd ed., doi:10.1016/C2010-0-65874-3, app. D), so the
-    disk's luminance is ``L = E / (pi sin^2 delta)``: 1.49e9 cd/m^2 for 100,000 lx at 0.53 deg. The
-    integral of the direction over the cone is parallel to its axis, so a surface whose normal makes
-    the angle i with the sun's direction receives exactly E cos(i) while the whole disk lies above its
-    horizon.
-
-    Sampling: directions uniform in solid angle over the disk's cone (cos(theta) uniform in
-    [cos(delta), 1]; Pharr, Jakob and Humphreys, "Physically Based Rendering", 3rd ed., sec. 13.6.4),
-    density 1 / (2 pi (1 - cos delta)) per steradian. 1 - cos is computed as 2 sin^2(delta / 2), and a
-    direction's 1 - cos(theta) from its dot product with the axis in float64, so that a 0.5 deg disk
-    keeps its exact size for float32 directions.
-
-    Parameters
-    ----------
-    direction : array_like, shape (3,)
-        Toward the sun's centre, world axes (z up); any non-zero length (normalised here).
-    illuminance_lux : float
-        E, lx, on a surface facing the sun; finite and >= 0.
-    angular_diameter_deg : float
-        2 delta, degrees, in (0, :data:`SUN_MAX_ANGULAR_DIAMETER_DEG`].
-    color : array_like, shape (3,)
-        Linear Rec.709, normalised to unit luminance (:func:`tracer.core.units.normalize_color`).
-
-    Raises
-    ------
-    ValueError
-        A zero or non-finite direction, a negative or non-finite illuminance, an angular diameter
-        outside its range, a colour with a negative component or zero luminance.
-    """
-
-    def __init__(self, direction, illuminance_lux: float = SUN_ILLUMINANCE_LX,
-                 angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG, color=(1.0, 1.0, 1.0)):
-        d = np.asarray(direction, dtype=np.float64).reshape(3)
-        length = float(np.linalg.norm(d))
-        if not (math.isfinite(length) and length > 0):
-            raise ValueError(f"the sun's direction must be finite and non-zero, got {d.tolist()}")
-        if not (math.isfinite(illuminance_lux) and illuminance_lux >= 0):
-            raise ValueError(f"the sun's illuminance must be finite and >= 0 lx, got {illuminance_lux}")
-        if not (0 < angular_diameter_deg <= SUN_MAX_ANGULAR_DIAMETER_DEG):
-            raise ValueError(f"the sun's angular diameter must lie in (0, {SUN_MAX_ANGULAR_DIAMETER_DEG:g}] deg, "
-                             f"got {angular_diameter_deg}")
-        self.direction = d / length
-        self.illuminance_lux = float(illuminance_lux)
-        self.angular_diameter_deg = float(angular_diameter_deg)
-        self.color = normalize_color(color)
-        delta = math.radians(self.angular_diameter_deg) / 2
-        #: 1 - cos(delta), without cancellation.
-        self.one_minus_cos = 2.0 * math.sin(delta / 2) ** 2
-        #: The disk's solid angle, sr.
-        self.solid_angle_sr = 2.0 * math.pi * self.one_minus_cos
-        #: The disk's luminance, cd/m^2: E / (pi sin^2 delta).
-        self.luminance_cd_m2 = self.illuminance_lux / (math.pi * math.sin(delta) ** 2)
-        self._rgb = self.luminance_cd_m2 * self.color
-        self._frame = frame_from_normal(self.direction.reshape(3, 1))
-
-    def _inside(self, d: np.ndarray) -> np.ndarray:
-        """Whether directions (3, n) float64 of any non-zero length point into the disk."""
-        return 1.0 - dot(d, self.direction) / norm(d) <= self.one_minus_cos
-
-    def radiance(self, d) -> np.ndarray:
-        inside = self._inside(_as_directions(d))
-        return np.where(inside, self._rgb[:, None], 0.0)
-
-    def sample(self, u):
-        """Directions uniform over the disk (u (2, n) -> unit directions (3, n), radiance, density)."""
-        u = np.asarray(u, dtype=np.float64)
-        x = u[0] * self.one_minus_cos  # 1 - cos(theta), uniform in [0, 1 - cos(delta)]
-        sin = np.sqrt(x * (2.0 - x))
-        phi = 2.0 * np.pi * u[1]
-        local = np.stack([sin * np.cos(phi), sin * np.sin(phi), 1.0 - x])
-        d = to_world(local, *self._frame)
-        n = d.shape[1]
-        return d, np.repeat(self._rgb[:, None], n, axis=1), np.full(n, 1.0 / self.solid_angle_sr)
-
-    def pdf(self, d):
-        return np.where(self._inside(_as_directions(d)), 1.0 / self.solid_angle_sr, 0.0)
-
-    @property
-    def power(self) -> float:
-        """The integral of the luminance over the sphere, cd/m^2 sr: L times the disk's solid angle
-        (2 E / (1 + cos delta), a little less than E)."""
-        return self.luminance_cd_m2 * self.solid_angle_sr
-
-    @property
-    def mean_luminance(self) -> float:
-        return self.power / (4.0 * math.pi)
-
-    @property
-    def max_luminance(self) -> float:
-        return self.luminance_cd_m2
-
-
-class EnvironmentWithSun(Environment):
-    """An environment (``base``: none, uniform or an HDRI) with a :class:`Sun` added to it.
-
-    - ``radiance(d)``: the base's plus the sun disk's;
-    - ``sample(u)``: one-sample mixture (Veach 1997, sec. 9.2.4, doi:10.5555/927297): the sun with
-      probability ``sun_share`` = its power over the sum of both powers (a part's power is the
-      integral of its luminance over the sphere, 4 pi times its mean luminance), else the base's own
-      importance sampling; ``u[0]`` is rescaled into the chosen part, so the base keeps its
-      stratification; the radiance and density returned are the sum's and the mixture's at the
-      directions drawn;
-    - ``pdf(d)``: the mixture's density, (1 - share) p_base(d) + share p_sun(d), per steradian;
-    - ``mean_luminance``: the base's plus the sun's power / (4 pi);
-    - ``max_luminance``: the base's largest plus the sun's luminance: a bound of the luminance in
-      any direction (what the roulette and the analysis need), reached where the base's brightest
-      direction lies inside the disk.
-
-    The calibration of an HDRI base applies to the panorama alone: its ``mean``, ``max`` or ``min``
-    is the panorama's, before the sun is added.
-    """
-
-    def __init__(self, base: Environment, sun: Sun):
-        self.base, self.sun = base, sun
-        base_power = 4.0 * math.pi * base.mean_luminance
-        total = base_power + sun.power
-        #: Probability that :meth:`sample` draws from the sun.
-        self.sun_share = sun.power / total if total > 0 else 0.0
-
-    def radiance(self, d) -> np.ndarray:
-        d = _as_directions(d)
-        return self.base.radiance(d) + self.sun.radiance(d)
-
-    def sample(self, u):
-        u = np.asarray(u, dtype=np.float64)
-        share = self.sun_share
-        from_sun = u[0] < share
-        d = np.empty((3, u.shape[1]))
-        k = np.flatnonzero(from_sun)
-        if len(k):
-            d[:, k] = self.sun.sample(np.stack([u[0, k] / share, u[1, k]]))[0]
-        k = np.flatnonzero(~from_sun)
-        if len(k):
-            rest = np.minimum((u[0, k] - share) / (1.0 - share), np.nextafter(1.0, 0.0))
-            d[:, k] = self.base.sample(np.stack([rest, u[1, k]]))[0]
-        return d, self.radiance(d), self.pdf(d)
-
-    def pdf(self, d):
-        d = _as_directions(d)
-        p = self.sun_share * self.sun.pdf(d)
-        if self.sun_share < 1.0:
-            p = p + (1.0 - self.sun_share) * self.base.pdf(d)
-        return p
-
-    @property
-    def mean_luminance(self) -> float:
-        return self.base.mean_luminance + self.sun.mean_luminance
-
-    @property
-    def max_luminance(self) -> float:
-        return self.base.max_luminance + self.sun.max_luminance
-
-
-# Fields each environment type accepts in scene.json.
-_FIELDS = {
-    "none": {"sun"},
-    "uniform": {"luminance", "color", "sun"},
-    "hdri": {"file", "calibration", "rotation_deg", "sun"},
-}
-_REQUIRED = {"none": set(), "uniform": {"luminance"}, "hdri": {"file", "calibration"}}
-#: Fields of the "sun" block (all but the direction optional).
-_SUN_FIELDS = {"illuminance_lux", "angular_diameter_deg", "color"}
-
-
-def _check_luminous(ck, rgb: np.ndarray, fld: str):
-    """Refuse a colour whose luminance is not positive (black, or so dark that it is 0 in floating
-    point): it is normalised to unit luminance (tracer.core.units.normalize_color)."""
-    if not float(rgb @ Y_WEIGHTS) > 0.0:
-        ck.fail(fld, "must have a positive luminance (0.2126 R + 0.7152 G + 0.0722 B): it is black, or so dark that "
-                     "its luminance is 0 in floating point")
-
-
-def _sun_from_spec(ck: FieldChecker, spec) -> Sun:
-    """The :class:`Sun` of an environment's "sun" block, validated field by field."""
-    ck.obj(spec, "environment.sun")
-    ck.keys(spec, "environment.sun", {"direction"}, _SUN_FIELDS)
-    direction = ck.unit_vector(spec["direction"], "environment.sun.direction")
-    e = ck.number(spec.get("illuminance_lux", SUN_ILLUMINANCE_LX), "environment.sun.illuminance_lux",
-                  min_value=0.0, max_value=MAX_LUMINANCE)
-    diameter = ck.number(spec.get("angular_diameter_deg", SUN_ANGULAR_DIAMETER_DEG),
-                         "environment.sun.angular_diameter_deg", min_value=0.0, min_exclusive=True,
-                         max_value=SUN_MAX_ANGULAR_DIAMETER_DEG)
-    rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.sun.color", max_value=None)
-    _check_luminous(ck, rgb, "environment.sun.color")
-    sun = Sun(direction, e, diameter, rgb)
-    if not sun.luminance_cd_m2 <= MAX_LUMINANCE:
-        ck.fail("environment.sun", f"illuminance_lux {e:g} over a disk of {diameter:g} deg gives it a luminance of "
-                                   f"{sun.luminance_cd_m2:.3g} cd/m^2 (E / (pi sin^2(diameter / 2))), above "
-                                   f"{MAX_LUMINANCE:g}: give a larger angular_diameter_deg or a smaller illuminance")
-    if 0 < sun.luminance_cd_m2 < MIN_LUMINANCE:
-        ck.fail("environment.sun.illuminance_lux", f"{e:.3g} lx gives the sun's disk a luminance of "
-                                                   f"{sun.luminance_cd_m2:.3g} cd/m^2, below {MIN_LUMINANCE:g} "
-                                                   "(give 0 for no sun)")
-    return sun
-
-
-def environment_from_spec(spec: dict, scene_dir: Path, file: str = "scene.json",
-                          allow_external: bool = False) -> Environment:
-    """Build the environment described by the "environment" block of scene.json.
-
-    Accepted blocks (no other fields)::
-
-        {"type": "none"}
-        {"type": "uniform", "luminance": L, "color": [r, g, b]}
-        {"type": "hdri", "file": "relative/path.exr",
-         "calibration": {"mode": "scale" | "mean" | "max" | "min", "value": v},
-         "rotation_deg": 0}
-
-    each with an optional sun (:class:`Sun`, added by :class:`EnvironmentWithSun`)::
-
-        "sun": {"direction": [x, y, z], "illuminance_lux": 100000, "angular_diameter_deg": 0.53,
-                "color": [r, g, b]}
-
-    with L >= 0 cd/m^2, ``color`` optional (white; linear Rec.709, normalised to unit
-    luminance), v > 0 (:class:`HdriEnvironment`), ``rotation_deg`` optional (0); the sun's
-    ``direction`` toward it (world axes, z up; normalised), ``illuminance_lux`` >= 0 on a surface
-    facing it, ``angular_diameter_deg`` in (0, 20], each but the direction optional (defaults
-    above), and its disk's luminance E / (pi sin^2(diameter / 2)) at most 1e12 cd/m^2. The image
-    file is relative to ``scene_dir`` and read with :func:`tracer.core.imageio.read_image` (float
-    files as stored, integer files sRGB-decoded); 1 channel: grey; 2: grey and alpha;
-    3: RGB; 4: RGBA; alpha is dropped.
-
-    Parameters
-    ----------
-    spec : dict
-        The parsed "environment" block.
-    scene_dir : pathlib.Path
-        The scene folder, against which the image path is resolved.
-    file : str
-        The scene file's name, for error messages.
-
-    Returns
-    -------
-    Environment
-
-    Raises
-    ------
-    SceneError
-        With field ``environment.<field>`` for an unknown type, an unknown, missing,
-        negative or non-numeric field, a black colour (``environment.sun.<field>`` for those of
-        the sun; ``environment.sun`` for a disk brighter than 1e12 cd/m^2); with field
-        ``environment.file`` for an image that is missing, unreadable, with more than 4 channels,
-        with negative or non-finite pixels, black with calibration "mean" or "max", or with a
-        black pixel with calibration "min".
-    """
-    ck = FieldChecker(file, allow_external)
-    ck.obj(spec, "environment")
-    if "type" not in spec:
-        ck.fail("environment.type", "missing required field")
-    kind = spec["type"]
-    if not isinstance(kind, str) or kind not in _FIELDS:
-        ck.fail("environment.type", f"unknown type {json.dumps(kind)[:40]} (known: {', '.join(_FIELDS)})")
-    ck.keys(spec, "environment", _REQUIRED[kind] | {"type"}, _FIELDS[kind] - _REQUIRED[kind])
-    sun = _sun_from_spec(ck, spec["sun"]) if "sun" in spec else None
-    base = _base_from_spec(ck, kind, spec, scene_dir, file)
-    return base if sun is None else EnvironmentWithSun(base, sun)
-
-
-def _base_from_spec(ck: FieldChecker, kind: str, spec: dict, scene_dir: Path, file: str) -> Environment:
-    """The environment of a block whose fields are known to be those of ``kind``, without its sun."""
-    if kind == "none":
-        return NoEnvironment()
-
-    if kind == "uniform":
-        L = ck.number(spec["luminance"], "environment.luminance", min_value=0.0, max_value=MAX_LUMINANCE)
-        if 0 < L < MIN_LUMINANCE:
-            ck.fail("environment.luminance", f"{L:.3g} cd/m^2 is below {MIN_LUMINANCE:g} (give 0 for no light)")
-        rgb = ck.rgb(spec.get("color", [1.0, 1.0, 1.0]), "environment.color", max_value=None)
-        _check_luminous(ck, rgb, "environment.color")
-        return UniformEnvironment(L, rgb)
-
-    image_file = ck.string(spec["file"], "environment.file")
-    cal = ck.obj(spec["calibration"], "environment.calibration")
-    ck.keys(cal, "environment.calibration", {"mode", "value"}, set())
-    mode = cal["mode"]
-    if not isinstance(mode, str) or mode not in CALIBRATION_MODES:
-        ck.fail("environment.calibration.mode", f"unknown mode {json.dumps(mode)[:40]} (known: "
-                                                f"{', '.join(CALIBRATION_MODES)})")
-    limit = MAX_ABS if mode == "scale" else MAX_LUMINANCE
-    value = ck.number(cal["value"], "environment.calibration.value", min_value=0.0, min_exclusive=True,
-                      max_value=limit)
-    rotation = ck.number(spec.get("rotation_deg", 0.0), "environment.rotation_deg", min_value=-1e6, max_value=1e6)
-
-    try:
-        pixels = read_image(ck.path(scene_dir, image_file, "environment.file"))
-    except ImageReadError as exc:
-        raise SceneError(file, "environment.file", f"cannot read {image_file!r}: {exc.reason}") from exc
-    try:
-        env = HdriEnvironment(panorama_rgb(pixels), mode, value, rotation, source=image_file)
-    except ValueError as exc:
-        raise SceneError(file, "environment.file", f"{image_file!r}: {exc}") from exc
-    if not env.max_luminance <= MAX_LUMINANCE:
-        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance!r} "
-                                                 f"cd/m^2, above {MAX_LUMINANCE:g}")
-    if 0 < env.max_luminance < MIN_LUMINANCE:
-        ck.fail("environment.calibration.value", f"makes the panorama's brightest pixel {env.max_luminance:.3g} "
-                                                 f"cd/m^2, below {MIN_LUMINANCE:g}")
-    return env

@@ -1,0 +1,276 @@
+"""The brightness-theorem comparison: the render against the deterministic prediction of the specular
+chains (:mod:`tracer.transport.chains`) on the image's sections (paper sec. 4.1's symbols and
+background: the pixels whose chief ray's dominant chain crosses a clear or a black LCD cell), with the
+ghost image's ratio and offset, and the warnings of light a render missed.
+
+The brightness theorem: luminance is conserved along a lossless specular chain, so the luminance the
+eye sees through mirrors, glass and an LCD is the product of their reflectances and transmittances
+times the luminance behind them (../shared/reference/hud-physics.md, "Photometry").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.units import luminance
+from ..transport.chains import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
+from ..transport.world import World
+from .hud import erode
+
+
+def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
+    """Mean rendered Y over flat pixel indices and its standard error (independent pixels)."""
+    k = len(idx)
+    return {"pixels": int(k), "rendered_cd_m2": float(y[idx].mean()),
+            "standard_error_cd_m2": float(math.sqrt(var[idx].sum()) / k)}
+
+
+def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]:
+    """Integer shift (dy, dx) that best overlays boolean grid ``b`` on ``a``."""
+    best, arg = -1, (0, 0)
+    for dy in range(-max_shift, max_shift + 1):
+        for dx in range(-max_shift, max_shift + 1):
+            score = int((a & np.roll(np.roll(b, dy, 0), dx, 1)).sum())
+            if score > best:
+                best, arg = score, (dy, dx)
+    return arg
+
+
+#: The pupil-integrated prediction: n x n stratified pupil points per pixel, on at most this many
+#: evenly spaced pixels of each section.
+PUPIL_GRID = 6
+
+
+PUPIL_PIXELS = 128
+
+
+#: A section's prediction is not comparable with the render when the light its scattering surfaces
+#: receive through specular surfaces (not followed by the analysis) would add more than this share.
+SPECULAR_SHARE = 0.01
+
+
+#: Pupil fill (pupil-integrated over chief-ray prediction) outside 1 +- this is reported in the notes.
+FILL_NOTE = 0.05
+
+
+#: A comparable section rendered more than MISSING_SHARE below its prediction and more than
+#: MISSING_SIGMA combined standard errors below it is reported as light the render missed (a normal
+#: variate falls 5 sigma low 3 times in 10 million). Only a deficit is: the analysis leaves out light
+#: scattered between diffuse surfaces, so a render may rightly exceed it.
+MISSING_SHARE = 0.02
+
+
+MISSING_SIGMA = 5.0
+
+
+#: Paths named in a section's breakdown; the rest are summed as "other paths".
+BREAKDOWN_PATHS = 3
+
+
+def per_pixel(paths: list[dict], n: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
+    """(total Y (n,), Y per path [(n,)], through-specular Y (n,), coarse Y (n,): the part of the total
+    from lights closer than the quadrature resolves) summed per analysed pixel, cd/m^2."""
+    total, through, coarse, per_path = np.zeros(n), np.zeros(n), np.zeros(n), []
+    for p in paths:
+        y = np.zeros(n)
+        np.add.at(y, p["pixel"], luminance(p["luminance"]))
+        np.add.at(through, p["pixel"], p["through_specular"])
+        np.add.at(coarse, p["pixel"], p["coarse"])
+        total += y
+        per_path.append(y)
+    return total, per_path, through, coarse
+
+
+def evenly(idx: np.ndarray, k: int) -> np.ndarray:
+    """At most ``k`` entries of ``idx`` evenly spaced through it."""
+    if len(idx) <= k:
+        return idx
+    return idx[np.unique(np.linspace(0, len(idx) - 1, k).round().astype(np.int64))]
+
+
+def missing_light_warnings(analysis: dict, method: str) -> list[str]:
+    """A warning for each comparable section of :func:`brightness_theorem` that the render puts more than
+    MISSING_SHARE and MISSING_SIGMA combined standard errors below the prediction: light along specular
+    chains that the render did not find, and that its error bars cannot show (a standard error from the
+    replicates sees only the paths that were sampled). In forward tracing that is light reached through
+    directions its aim leaves to the unaimed share: glass or a lens between an emitter and its aim
+    target bends the aimed rays away from the target, so the light that does reach the eye arrives in
+    rare heavy particles."""
+    out = []
+    for key in ("symbol", "background", "image"):
+        entry = analysis.get(key)
+        if not entry or entry.get("rendered_minus_predicted_sigma") is None:
+            continue
+        ratio, sigma = entry["rendered_over_predicted"], entry["rendered_minus_predicted_sigma"]
+        if ratio < 1 - MISSING_SHARE and sigma < -MISSING_SIGMA:
+            advice = (": light outside an emitter's aim (glass or a lens between it and its target bends the aimed "
+                      "light off it) or high-order ghosts; render with the backward method, whose connections find "
+                      "it, or aim at the target's image through the optics" if method in ("forward", "photon") else "")
+            out.append(f"the {key} section renders {ratio:.3g} of the brightness-theorem prediction "
+                       f"({entry['rendered_cd_m2']:.4g} against {entry['predicted_cd_m2']:.4g} cd/m^2, "
+                       f"{-sigma:.3g} combined standard errors below it): the render misses light that reaches the "
+                       f"eye through specular optics in paths too rare for its error bars to show{advice}")
+    return out
+
+
+def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True) -> dict:
+    """Compare the render with the brightness-theorem prediction of :mod:`tracer.transport.chains`.
+
+    Sections come from the chief rays' dominant chain: "symbol" where its LCD cell is clear,
+    "background" where it is black, or "image" (every pixel the chain reaches) where it has no LCD;
+    all eroded by one grid cell, so edges blurred by the pupil are left out. Up to PUPIL_PIXELS
+    evenly spaced pixels of each section are compared (``pixels``; the section has
+    ``section_pixels``): the rendered mean over them against a prediction that follows each of them
+    with PUPIL_GRID^2 rays from points over the pupil and the pixel (with its standard error)
+    (``predicted_cd_m2``; the chief ray's alone is ``predicted_chief_ray_cd_m2``, their ratio
+    ``pupil_fill``), and its breakdown by path sums to it ("other paths" included). ``environment``
+    False (a method that does not render it) leaves the environment out of the prediction.
+
+    A section is compared (``rendered_over_predicted``) only where the analysis' assumptions hold;
+    otherwise ``valid`` is false and ``not_comparable`` says why: a scattering surface lit through
+    specular surfaces (a condenser lens) whose light the analysis does not follow, or by a light
+    closer than its quadrature resolves (a backlight right behind a screen).
+    """
+    res = specular_paths(world, environment=environment)
+    grid_h, grid_w = res["grid"]
+    pixels = res["pixels"]
+    npts = len(pixels)
+    total, per_path, _, _ = per_pixel(res["paths"], npts)
+    out: dict = {
+        "method": "every specular branch followed from the pupil (chief rays for the path list; "
+                  f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
+                  "directly by the emitters (deterministic quadrature) and by the environment ("
+                  f"{ENV_SAMPLES} directions from its own distribution per point); luminance = product of R and T "
+                  "along the chain x luminance behind it" + ("" if environment else "; the environment left out, as "
+                                                             "the method does not render it"),
+        "assumptions": "light reaches scattering surfaces directly from the emitters and the environment, not "
+                       "through specular optics, and from no light closer than the quadrature resolves",
+        "grid_stride_px": res["stride"],
+        "valid": True,
+        "not_comparable": [],
+        "notes": [],
+        "paths": [],
+    }
+    y_img = image_y.reshape(-1)
+    v_img = var_y.reshape(-1)
+    for p, y in zip(res["paths"][:8], per_path[:8], strict=True):
+        out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / npts),
+                             "predicted_mean_cd_m2": float(y.mean()),
+                             "transfer_factor_mean": float(p["factor"].mean())})
+    if len(res["paths"]) > 8:
+        out["paths"].append({"path": "other paths", "predicted_mean_cd_m2": float(sum(y.mean() for y in per_path[8:]))})
+    if not res["paths"]:
+        return out
+    lcd_paths = [p for p in res["paths"] if np.any(np.isfinite(p["lcd"]))]
+    masks = {}
+    grid_lcd = None
+    if lcd_paths:
+        main = lcd_paths[0]
+        grid_lcd = np.full(npts, np.nan)
+        grid_lcd[main["pixel"]] = main["lcd"]
+        grid_lcd = grid_lcd.reshape(grid_h, grid_w)
+        masks["symbol"] = erode(grid_lcd >= 0.5)
+        # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
+        # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
+        background = grid_lcd < 0.5
+        for p in lcd_paths[1:2]:
+            other = np.full(npts, np.nan)
+            other[p["pixel"]] = p["lcd"]
+            background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
+        masks["background"] = erode(background)
+    else:
+        reached = np.zeros(npts, bool)
+        reached[res["paths"][0]["pixel"]] = True
+        masks["image"] = erode(reached.reshape(grid_h, grid_w))
+        out["image_path"] = res["paths"][0]["path"]
+    blockers = dict(res["specular_blockers"])
+    ends = []  # where the sections' pupil rays end, for the aims' coverage
+    for key, mask in masks.items():
+        idx = np.nonzero(mask.ravel())[0]
+        if len(idx) == 0:
+            continue
+        sel = evenly(idx, PUPIL_PIXELS)
+        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment)
+        for k, v in pup["specular_blockers"].items():
+            blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
+        ends += pup["ends"]
+        p_total, p_per_path, p_through, p_coarse = per_pixel(pup["paths"], len(sel))
+        entry = _mask_stats(y_img, v_img, pixels[sel])  # the rendered pixels the prediction is made for
+        entry["section_pixels"] = int(len(idx))
+        pred = float(p_total.mean())
+        # The prediction's own sampling error: each pixel's mean of its n^2 rays (the stratified
+        # variance is at most this estimate).
+        n2 = pup["pupil_samples"]
+        per_ray = np.zeros(len(sel) * n2)
+        for p in pup["paths"]:
+            np.add.at(per_ray, p["ray"], luminance(p["luminance"]) * n2)
+        var_pixel = per_ray.reshape(len(sel), n2).var(axis=1, ddof=1) / n2
+        entry["predicted_standard_error_cd_m2"] = float(math.sqrt(var_pixel.sum()) / len(sel))
+        chief = float(total[sel].mean())
+        entry["predicted_cd_m2"] = pred
+        entry["predicted_chief_ray_cd_m2"] = chief
+        entry["pupil_fill"] = pred / chief if chief > 0 else None
+        named = {p["path"]: float(y.mean()) for p, y in zip(pup["paths"][:BREAKDOWN_PATHS],
+                                                            p_per_path[:BREAKDOWN_PATHS], strict=True)}
+        if len(pup["paths"]) > BREAKDOWN_PATHS:
+            named["other paths"] = float(sum(y.mean() for y in p_per_path[BREAKDOWN_PATHS:]))
+        entry["predicted_by_path_cd_m2"] = named
+        through = float(p_through.mean())
+        entry["through_specular_cd_m2"] = through
+        reasons = []
+        if through > SPECULAR_SHARE * (pred + through):
+            lit = ", ".join(f"{s} (through {', '.join(b)})" for s, b in sorted(blockers.items()))
+            reasons.append(f"{key}: scattering surfaces are lit through specular optics the analysis does not follow: "
+                           f"{lit}; direct light would add {through:.4g} cd/m^2 to the {pred:.4g} predicted, so the "
+                           "prediction is a lower bound")
+        coarse_y = float(p_coarse.mean())
+        if coarse_y > SPECULAR_SHARE * pred:
+            reasons.append(f"{key}: {coarse_y:.4g} of the {pred:.4g} cd/m^2 predicted comes from lights closer to the "
+                           "scattering surfaces than the analysis' quadrature resolves (cells larger than "
+                           f"{QUAD_TRUST:g} x their distance: a large light right behind a screen or diffuser), so "
+                           "the prediction is not reliable there")
+        if entry["pupil_fill"] is not None and abs(entry["pupil_fill"] - 1) > FILL_NOTE:
+            out["notes"].append(f"{key}: what the chief ray sees fills {100 * entry['pupil_fill']:.3g} % of the pupil "
+                                f"as seen through the optics: the chief ray alone would predict {chief:.4g} cd/m^2, "
+                                f"the pupil average is {pred:.4g}")
+        entry["valid"] = not reasons
+        entry["rendered_over_predicted"] = entry["rendered_cd_m2"] / pred if pred > 0 and not reasons else None
+        combined = math.hypot(entry["standard_error_cd_m2"], entry["predicted_standard_error_cd_m2"])
+        entry["rendered_minus_predicted_sigma"] = ((entry["rendered_cd_m2"] - pred) / combined
+                                                   if combined > 0 and entry["rendered_over_predicted"] is not None
+                                                   else None)
+        out["not_comparable"] += reasons
+        out[key] = entry
+    out["valid"] = not out["not_comparable"]
+    out["aim_coverage"] = aim_coverage(world, ends)
+    if lcd_paths:
+        out["lcd_contrast_ratio"] = next(o.material.params["contrast_ratio"] for o in world.scene.objects
+                                         if o.material.type == "lcd")
+        if "symbol" in out and "background" in out:
+            out["symbol_over_contrast_ratio_cd_m2"] = out["symbol"]["rendered_cd_m2"] / out["lcd_contrast_ratio"]
+            out["rendered_contrast"] = (out["symbol"]["rendered_cd_m2"] / out["background"]["rendered_cd_m2"]
+                                        if out["background"]["rendered_cd_m2"] > 0 else None)
+    if len(lcd_paths) > 1:
+        main, ghost = lcd_paths[0], lcd_paths[1]
+        main_y = luminance(main["luminance"])
+        ghost_y = luminance(ghost["luminance"])
+        g_lcd = np.full(npts, np.nan)
+        g_lcd[ghost["pixel"]] = ghost["lcd"]
+        g_open = (g_lcd >= 0.5).reshape(grid_h, grid_w)
+        dy, dx = _shift(grid_lcd >= 0.5, g_open)
+        eye = world.eye
+        px_mrad = 1000 * 2 * math.atan(eye.half_x / eye.focal) / eye.width
+        g_sel = np.isin(ghost["pixel"], np.nonzero(g_lcd >= 0.5)[0])
+        m_sel = np.isin(main["pixel"], np.nonzero(grid_lcd.ravel() >= 0.5)[0])
+        g_mean = float(ghost_y[g_sel].mean()) if g_sel.any() else 0.0
+        m_mean = float(main_y[m_sel].mean()) if m_sel.any() else 0.0
+        out["ghost"] = {
+            "path": ghost["path"],
+            "predicted_cd_m2": g_mean,
+            "ratio_to_symbol": g_mean / m_mean if m_mean > 0 else None,
+            "offset_px": [-dx * res["stride"], -dy * res["stride"]],
+            "offset_mrad": float(math.hypot(dx, dy) * res["stride"] * px_mrad),
+        }
+    return out

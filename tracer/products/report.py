@@ -1,0 +1,163 @@
+"""report.json: the figures of a render (docs/report.md describes every field), and the readouts a
+person reads off it (the command line's ``readouts``, Blender's HUD Readouts panel)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from .. import __version__
+from ..analysis.aims import aim_warnings
+from ..analysis.brightness import missing_light_warnings
+from ..core.errors import EstimateOverflowError
+from ..core.units import luminance
+from ..methods import INTEGRATORS, Budget, RenderResult
+from ..scene import Scene
+from .tonemap import log_average_luminance
+
+#: Median relative standard error of the lit pixels above which the report warns of noise.
+NOISY = 0.5
+
+
+def components_report(result: RenderResult) -> dict:
+    """Each film component's share of the image, its mean luminance and that mean's standard error."""
+    film = result.film
+    out = {}
+    total = float(luminance(film.rgb()).sum())
+    for name, kind in film.kinds.items():
+        y = luminance(film.component_rgb(name))
+        var = film.component_variance_y(name)
+        out[name] = {"normalised_by": kind, "count": film.norm[name], "mean_cd_m2": float(y.mean()),
+                     "standard_error_cd_m2": float(math.sqrt(var.sum()) / y.size),
+                     "share": float(y.sum()) / total if total > 0 else 0.0}
+    return out
+
+
+def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
+                 budget: Budget, analysis: dict | None, efficiency_definition: str = "") -> dict:
+    y = luminance(image)
+    rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
+    lit = y > 1e-6 * max(float(y.max()), 1e-300)
+    median_err = float(np.median(rel_err[lit])) if lit.any() else None
+    warnings = list(result.warnings)
+    if median_err is not None and median_err > NOISY:
+        warnings.append(f"the image is dominated by noise: the median relative standard error of lit pixels is "
+                        f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time"
+                        f"{INTEGRATORS[result.method].noise_advice if result.method in INTEGRATORS else ''}")
+    if analysis is not None:
+        warnings += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
+        warnings += missing_light_warnings(analysis, result.method)
+        if result.method in ("forward", "photon"):
+            warnings += aim_warnings(analysis)
+    return {
+        "tracer": f"hud-tracer {__version__}",
+        "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
+        "method": result.method,
+        "seed": result.seed,
+        "budget": {"rays": budget.rays, "seconds": budget.seconds},
+        "partial": result.partial,
+        "rays": result.rays,
+        "paths": result.paths,
+        "paths_found_light": result.found,
+        "batches": result.batches,
+        "workers": result.extra.get("workers", 1),
+        "seconds": result.seconds,
+        "rays_per_second": result.rays_per_second,
+        "efficiency": result.efficiency,
+        "efficiency_definition": efficiency_definition,
+        "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
+                      "log_average": log_average_luminance(y),
+                      "mean_standard_error": result.film.mean_standard_error()},
+        "components": components_report(result),
+        "replicates": result.film.replicates,
+        "stage_seconds": result.stages,
+        "adaptation_luminance": preview_info["adaptation_luminance"],
+        "adaptation_mode": preview_info.get("adaptation_mode", "log_average"),
+        "noise": {"median_relative_standard_error_lit_pixels": median_err},
+        "preview": preview_info,
+        "image": {"width": image.shape[1], "height": image.shape[0],
+                  "channels": ["R", "G", "B", "Y", "Y_var"],
+                  "pixel_mrad": [1000 * 2 * math.atan(math.tan(math.radians(scene.eye.fov_deg[i]) / 2)) /
+                                 scene.eye.resolution[i] for i in range(2)]},
+        "warnings": warnings,
+        "method_details": result.extra,
+        "brightness_theorem": analysis,
+    }
+
+
+#: The top-level keys of a render's report.json, in their order (a test checks every method's report
+#: against it): what a sweep's ``--y`` and ``--require`` keys are checked against before any ray.
+REPORT_SECTIONS = ("run_id", "tracer", "scene", "method", "seed", "budget", "partial", "rays", "paths",
+                   "paths_found_light", "batches", "workers", "seconds", "rays_per_second", "efficiency",
+                   "efficiency_definition", "luminance", "components", "replicates", "stage_seconds",
+                   "adaptation_luminance", "adaptation_mode", "noise", "preview", "image", "warnings",
+                   "method_details", "brightness_theorem", "polarisation", "hud")
+
+
+def finite_json(value, where: str = "report") -> str:
+    """``value`` as JSON text; a NaN or infinite number (which JSON cannot hold) raises
+    :class:`EstimateOverflowError` naming its key path."""
+    def walk(v, path):
+        if isinstance(v, float) and not math.isfinite(v):
+            raise EstimateOverflowError(f"{where}: {path} is {v}: a value overflowed; the scene's luminances or "
+                                        "fluxes are beyond what the outputs can hold")
+        if isinstance(v, dict):
+            for k, x in v.items():
+                walk(x, f"{path}.{k}")
+        elif isinstance(v, (list, tuple)):
+            for i, x in enumerate(v):
+                walk(x, f"{path}[{i}]")
+
+    walk(value, "")
+    return json.dumps(value, indent=2, allow_nan=False) + "\n"
+
+
+def readouts(report: dict) -> list[tuple[str, str]]:
+    """The figures of a render's report (tracer.products.report.build_report) as (label, text) rows, for a panel
+    or a summary line: the HUD figures (symbols, background, contrast, the rear-projection spot), the
+    windshield's ghost (from the brightness-theorem analysis), the luminance the eye adapts to, and how
+    well the render converged (noise, efficiency, rays). Rows whose figures the report lacks (a
+    stopped render skips the analysis) are left out."""
+    rows: list[tuple[str, str]] = []
+    hud = report.get("hud") or {}
+    if "symbol_cd_m2" in hud:
+        rows.append(("Symbols", f"{hud['symbol_cd_m2']:,.4g} cd/m²"))
+        rows.append(("Background", f"{hud['background_cd_m2']:,.4g} cd/m²"))
+        if "environment_behind_symbols_cd_m2" in hud:
+            rows.append(("Behind the symbols", f"{hud['background_behind_symbols_cd_m2']:,.4g} cd/m² (environment "
+                                               f"{hud['environment_behind_symbols_cd_m2']:,.4g})"))
+        if hud["contrast_ratio"] is not None:
+            rows.append(("Contrast (Ls + Lb) / Lb", f"{hud['contrast_ratio']:,.4g} : 1"))
+    elif "display_cd_m2" in hud:
+        rows.append(("Display", f"{hud['display_cd_m2']:,.4g} cd/m² ({hud.get('note', '')})"))
+    elif hud.get("note"):
+        rows.append(("Display", hud["note"]))
+    spot = hud.get("spot")
+    if spot:
+        rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {spot['peak_over_median_background']:.3g} x the "
+                             f"background, {spot['half_peak_diameter_deg']:.2g} deg"))
+        if spot.get("contrast_against_environment") is not None:
+            rows.append(("Spot against the environment", f"{spot['contrast_against_environment']:.4g} : 1 (environment "
+                                                         f"{spot['environment_cd_m2']:,.4g} cd/m²)"))
+    ghost = (report.get("brightness_theorem") or {}).get("ghost")
+    if ghost and ghost.get("ratio_to_symbol") is not None:
+        dx, dy = ghost["offset_px"]
+        rows.append(("Ghost", f"{ghost['ratio_to_symbol']:.3g} of the symbols, {ghost['offset_mrad']:.3g} mrad "
+                              f"({dx:+d}, {dy:+d} px)"))
+    lum = report["luminance"]
+    rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
+    mode = report.get("adaptation_mode", "log_average").replace("_", "-")
+    rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² ({mode})"))
+    for name, ch in (report.get("method_details") or {}).get("channels", {}).items():
+        rows.append((f"Channel {name}", f"{ch['method']} ({ch['chosen_by']}), {ch['mean_cd_m2']:,.4g} cd/m² mean"
+                     if ch.get("method") else f"skipped: {ch['skipped']}"))
+    noise = report["noise"]["median_relative_standard_error_lit_pixels"]
+    if noise is not None:
+        rows.append(("Noise", f"{100 * noise:.3g} % per lit pixel (median standard error)"))
+    rows.append(("Efficiency", f"{report['efficiency']:.3g}"))
+    rows.append(("Rays", f"{report['rays']:,} in {report['seconds']:.3g} s ({report['rays_per_second'] / 1e6:.3g} M/s, "
+                         f"{report['workers']} process{'es' if report['workers'] > 1 else ''})"
+                         + (", stopped early" if report["partial"] else "")))
+    return rows
