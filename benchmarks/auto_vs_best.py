@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.convergence import RESULTS, errors, reference, reference_seconds, scene_folder  # noqa: E402
 from tracer.core.units import luminance  # noqa: E402
 from tracer.methods import INTEGRATORS, Budget  # noqa: E402
-from tracer.methods.hybrid import applicable  # noqa: E402
+from tracer.methods.pilots import applicable  # noqa: E402
 from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 from tracer.scene.methods import CANDIDATES  # noqa: E402

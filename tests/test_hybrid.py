@@ -10,7 +10,7 @@ from conftest import edit_json, film_dof, t_bound, welch_dof
 
 from tracer.core.units import luminance
 from tracer.methods import INTEGRATORS, Budget
-from tracer.methods.hybrid import applicable, combined_image, relative_variances
+from tracer.methods.pilots import applicable, combined_image, relative_variances
 from tracer.optics.pupil import pupil_diameter_mm
 from tracer.products.tonemap import adaptation_luminance
 from tracer.runtime.parallel import films_match, render_parallel
