@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tracer.core.units import Y_WEIGHTS  # noqa: E402
-from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.methods import INTEGRATORS, Budget, RenderResult  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
 
 
@@ -134,3 +134,12 @@ def preset(tmp_path):
 
 
 __all__ = ["z_bound", "t_bound", "welch_dof", "film_dof", "render", "edit_json", "math", "np"]
+
+
+def films_match(a: RenderResult, b: RenderResult, rtol: float = 1e-12) -> bool:
+    """Whether two results hold the same film up to rounding in the last bits (the determinism
+    check of the tests: independent sampling would differ by far more)."""
+    fa, fb = a.film, b.film
+    return (fa.norm == fb.norm and fa.replicates == fb.replicates
+            and all(np.allclose(fa.sums[k], fb.sums[k], rtol=rtol, atol=0) for k in fa.kinds)
+            and np.allclose(fa.rep_sq, fb.rep_sq, rtol=rtol, atol=0))

@@ -179,8 +179,10 @@ def test_meshes_load_from_every_format_the_scene_format_names(preset, ext):
 def test_two_processes_give_the_same_image_as_one(preset, method):
     """Seed-addressed batches merged in order: the same film on one and on two processes (to the
     last bits of rounding)."""
+    from conftest import films_match
+
     from tracer.methods import INTEGRATORS, Budget
-    from tracer.runtime.parallel import films_match, render_parallel
+    from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
@@ -193,9 +195,10 @@ def test_two_processes_give_the_same_image_as_one(preset, method):
 def test_dask_cluster_gives_the_same_image(preset):
     """The same seed-addressed batches on a Dask LocalCluster merge to the local image."""
     distributed = pytest.importorskip("distributed")
+    from conftest import films_match
+
     from tracer.methods import INTEGRATORS, Budget
     from tracer.runtime.distributed import render_dask
-    from tracer.runtime.parallel import films_match
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
@@ -215,8 +218,9 @@ def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(prese
     import importlib
     import types
 
+    from conftest import films_match
+
     from tracer.methods import INTEGRATORS, Budget
-    from tracer.runtime.parallel import films_match
     from tracer.scene import load_scene
 
     repo = tmp_path / "repo"

@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from conftest import edit_json, film_dof, t_bound, welch_dof
+from conftest import edit_json, film_dof, films_match, t_bound, welch_dof
 
 from tracer.core.units import luminance
 from tracer.methods import INTEGRATORS, Budget
 from tracer.methods.pilots import applicable, combined_image, relative_variances
 from tracer.optics.pupil import pupil_diameter_mm
 from tracer.products.tonemap import adaptation_luminance
-from tracer.runtime.parallel import films_match, render_parallel
+from tracer.runtime.parallel import render_parallel
 from tracer.scene import load_scene
 from tracer.transport.world import World
 

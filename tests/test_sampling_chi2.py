@@ -55,6 +55,33 @@ MESH = np.array(
 )
 
 
+#: Uniform points on a mesh and indices by weight, built from the tracer's own Distribution1D and
+#: TriangleSet (the light table's parts), to test those by chi-square.
+def triangle_areas(tris: np.ndarray) -> np.ndarray:
+    """Areas (mm^2), (m,), of triangles given as corners (m, 3, 3) (``tris[i, k]`` is corner k)."""
+    tris = np.asarray(tris, dtype=np.float64)
+    c = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    return 0.5 * np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])
+
+
+def sample_discrete(weights: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices drawn with probability proportional to ``weights`` (tracer.core.sampling.Distribution1D)."""
+    return smp.Distribution1D(weights).sample(u)
+
+
+def sample_triangles(tris: np.ndarray, u: np.ndarray, areas: np.ndarray | None = None):
+    """Uniform points on a triangle mesh (density 1/total_area per unit area).
+
+    A triangle is chosen with probability proportional to its area (u[0]), then a point uniformly
+    inside it (:func:`tracer.core.sampling.uniform_triangle` on u[1:]). ``tris`` (m, 3, 3) mm; ``u`` (3, n).
+
+    Returns (points (3, n) mm, triangle indices (n,)).
+    """
+    ts = smp.TriangleSet(tris)
+    tri, _ = smp.Distribution1D(ts.area if areas is None else areas).sample(u[0])
+    return ts.point(tri, u[1:]), tri
+
+
 def check(test: ChiSquareTest) -> None:
     ok, message = test.run(SIGNIFICANCE, TEST_COUNT)
     assert ok, message
@@ -282,10 +309,10 @@ def test_chi2_sample_disk_aperture():
 
 def test_chi2_sample_triangles():
     # x = triangle index + s, y = w; the density in triangle i is 2 s area_i / total_area.
-    areas = smp.triangle_areas(MESH)
+    areas = triangle_areas(MESH)
 
     def sample(n, rng):
-        points, tri = smp.sample_triangles(MESH, rng.random((3, n)))
+        points, tri = sample_triangles(MESH, rng.random((3, n)))
         v = MESH[tri]
         s, w = vertex_polar(points.T, v[:, 0], v[:, 1], v[:, 2]).T
         return all_valid(np.stack([tri + s, w], axis=-1))
@@ -303,7 +330,7 @@ def test_chi2_sample_discrete():
     k = len(weights)
 
     def sample(n, rng):
-        idx, _ = smp.sample_discrete(weights, rng.random(n))
+        idx, _ = sample_discrete(weights, rng.random(n))
         return all_valid(np.stack([idx + 0.5, np.full(n, 0.5)], axis=-1))
 
     def density(x, y):
@@ -482,8 +509,8 @@ def test_sample_disk_aperture_origin_in_plane():
 
 
 def test_triangle_areas_and_sample_triangles():
-    np.testing.assert_allclose(smp.triangle_areas(MESH)[[0, 2]], [6.0, 0.0])
-    points, tri = smp.sample_triangles(MESH, smp.make_rng(6).random((3, 10_000)))
+    np.testing.assert_allclose(triangle_areas(MESH)[[0, 2]], [6.0, 0.0])
+    points, tri = sample_triangles(MESH, smp.make_rng(6).random((3, 10_000)))
     assert not np.any(tri == 2)
     v = MESH[tri]
     s, w = vertex_polar(points.T, v[:, 0], v[:, 1], v[:, 2]).T
@@ -511,4 +538,4 @@ def test_sample_discrete_pmf_and_errors():
     np.testing.assert_allclose(pmf, dist.pmf(idx))
     for bad in ([0.0, 0.0], [1.0, -1.0], [1.0, np.nan], [1.0, np.inf], []):
         with pytest.raises(ValueError):
-            smp.sample_discrete(np.array(bad), np.array([0.5]))
+            sample_discrete(np.array(bad), np.array([0.5]))

@@ -291,13 +291,6 @@ def disk_aperture_pdf(origins: np.ndarray, d: np.ndarray, center: np.ndarray, no
     return np.where(hit, dist * dist / (np.pi * radius * radius * np.where(hit, np.abs(cos), 1.0)), 0.0)
 
 
-def triangle_areas(tris: np.ndarray) -> np.ndarray:
-    """Areas (mm^2), (m,), of triangles given as corners (m, 3, 3) (``tris[i, k]`` is corner k)."""
-    tris = np.asarray(tris, dtype=np.float64)
-    c = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    return 0.5 * np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])
-
-
 class Distribution1D:
     """A discrete distribution proportional to non-negative weights.
 
@@ -350,11 +343,6 @@ class Distribution1D:
         return self.pmf_table[idx]
 
 
-def sample_discrete(weights: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices drawn with probability proportional to ``weights`` (see :class:`Distribution1D`)."""
-    return Distribution1D(weights).sample(u)
-
-
 class TriangleSet:
     """Triangles (world mm) as planes for sampling: corner v0, edges e1 = v1 - v0, e2 = v2 - v0 and
     unit normals (e1 x e2), each (3, m); areas (m,) mm^2."""
@@ -379,14 +367,3 @@ class TriangleSet:
                 + b[1] * take(self.e2, tri))
 
 
-def sample_triangles(tris: np.ndarray, u: np.ndarray, areas: np.ndarray | None = None):
-    """Uniform points on a triangle mesh (density 1/total_area per unit area).
-
-    A triangle is chosen with probability proportional to its area (u[0]), then a point uniformly
-    inside it (:func:`uniform_triangle` on u[1:]). ``tris`` (m, 3, 3) mm; ``u`` (3, n).
-
-    Returns (points (3, n) mm, triangle indices (n,)).
-    """
-    ts = TriangleSet(tris)
-    tri, _ = Distribution1D(ts.area if areas is None else areas).sample(u[0])
-    return ts.point(tri, u[1:]), tri

@@ -37,8 +37,6 @@ import time
 import types
 from pathlib import Path
 
-import numpy as np
-
 from ..core.validate import check_workers
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import drive
@@ -239,10 +237,3 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     return result
 
 
-def films_match(a: RenderResult, b: RenderResult, rtol: float = 1e-12) -> bool:
-    """Whether two results hold the same film up to rounding in the last bits (the determinism
-    check of the tests: independent sampling would differ by far more)."""
-    fa, fb = a.film, b.film
-    return (fa.norm == fb.norm and fa.replicates == fb.replicates
-            and all(np.allclose(fa.sums[k], fb.sums[k], rtol=rtol, atol=0) for k in fa.kinds)
-            and np.allclose(fa.rep_sq, fb.rep_sq, rtol=rtol, atol=0))
