@@ -54,10 +54,10 @@ $(STAMP42): requirements-bpy42.lock pyproject.toml
 test-bpy-oldest: $(STAMP42)
 	$(VENV42)/bin/python -m pytest -q tests/test_blender_addon.py
 
-# Speed against accuracy: charts in docs/, CSVs in benchmarks/results/ (about 55 minutes on 2 cores: references,
+# Speed against accuracy: charts in docs/images/, CSVs in benchmarks/results/ (about 55 minutes on 2 cores: references,
 # 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs (the
 # unpolarised model and hud-direct's default, 6 minutes each), the eyebox scan
-# and the two hud-screen renders of docs/hud-screen-variants.png; then polarisation: Mitsuba's polarised variant
+# and the two hud-screen renders of docs/images/hud-screen-variants.png; then polarisation: Mitsuba's polarised variant
 # on a windshield and a panel, 3 minutes, the cost of polarised transport, 3 minutes, and forward tracing per
 # windshield ghost order, 3 minutes).
 # Mitsuba 3 as a peer (benchmarks/mitsuba_peer.py): its llvm variant needs LLVM 19 (Debian's LLVM 14/15

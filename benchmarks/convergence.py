@@ -14,7 +14,7 @@ records wall time, rays, the method's own efficiency, the relative RMSE
 against the reference over the whole image and over the bright region (pixels above 10 % of the
 reference's 99th percentile: the symbols of hud-direct, the lit panel of analytic-mirror), with the
 reference's own noise subtracted from the mean squared error, and the time efficiency
-1 / (relative MSE x seconds). Output: benchmarks/results/<preset>.csv, docs/convergence-<preset>.png
+1 / (relative MSE x seconds). Output: benchmarks/results/<preset>.csv, docs/images/convergence-<preset>.png
 (log-log, one line per method, slope -1/2 drawn through each method's first point) and
 benchmarks/results/summary.md. benchmarks/mitsuba_peer.py adds Mitsuba 3's lines to the same CSVs,
 charts and summary with the functions below (one metric implementation: :func:`errors`).
@@ -45,7 +45,7 @@ from tracer.transport.world import World  # noqa: E402
 
 CACHE = ROOT / "benchmarks" / "cache"
 RESULTS = ROOT / "benchmarks" / "results"
-DOCS = ROOT / "docs"
+DOCS = ROOT / "docs" / "images"
 #: The reference's method: backward with next-event estimation, or for the presets named here the
 #: photon method; and the presets that get the full --ref-seconds (the rest, closed-form scenes, a third).
 REFERENCE_METHOD = "backward"
@@ -171,7 +171,7 @@ def charted(row: dict) -> bool:
 
 
 def chart(name: str, rows: list[dict], ref: dict):
-    """docs/convergence-<name>.png: one line per method in ``rows`` (in their order), rows that cannot
+    """docs/images/convergence-<name>.png: one line per method in ``rows`` (in their order), rows that cannot
     render left out (named in the legend); the tracer's methods in solid lines, peers (Mitsuba) dashed
     with triangles; the reference's own noise as a horizontal line."""
     import matplotlib
@@ -204,7 +204,7 @@ def chart(name: str, rows: list[dict], ref: dict):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    DOCS.mkdir(exist_ok=True)
+    DOCS.mkdir(parents=True, exist_ok=True)
     fig.savefig(DOCS / f"convergence-{name}.png", dpi=110)
     plt.close(fig)
 

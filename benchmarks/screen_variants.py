@@ -4,7 +4,7 @@ contrast, 300:1 (b), rendered with the photon method; the rear-projection spot a
     .venv/bin/python benchmarks/screen_variants.py [--seconds 120] [--workers 2]
 
 Renders hud-screen-ideal-lcd and hud-screen (every pixel, --seconds each, seed 1) and writes
-docs/hud-screen-variants.png (the two previews one above the other, tone-mapped alike: Ward 1994 for
+docs/images/hud-screen-variants.png (the two previews one above the other, tone-mapped alike: Ward 1994 for
 the eye adapted to the real-contrast image, and a second pair on a log scale over four decades below
 the symbols, where the spot shows) and benchmarks/results/hud-screen-variants.md (the report's HUD
 figures: symbols, background, contrast ratio, the spot's peak and size, and the method's figures).
@@ -63,8 +63,8 @@ def main():
         rows.append((np.repeat(v[..., None], 3, axis=2) * 255).astype(np.uint8))
     gap = np.full((4, real.shape[1], 3), 255, np.uint8)
     sheet = np.concatenate([x for r in rows for x in (r, gap)][:-1], axis=0)
-    (ROOT / "docs").mkdir(exist_ok=True)
-    write_png(ROOT / "docs" / "hud-screen-variants.png", sheet)
+    (ROOT / "docs" / "images").mkdir(parents=True, exist_ok=True)
+    write_png(ROOT / "docs" / "images" / "hud-screen-variants.png", sheet)
     lines = ["| | symbols, cd/m² | background, cd/m² | CR = (Ls + Lb) / Lb | spot peak, cd/m² | spot / median "
              "background | spot size (half peak), deg | photons | rays | seconds |", "|---|---|---|---|---|---|---|---|"
              "---|---|"]

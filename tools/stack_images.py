@@ -1,4 +1,4 @@
-"""Stack PNG images vertically with a white gap between them (the README's docs/studies.png).
+"""Stack PNG images vertically with a white gap between them (docs/images/studies.png).
 
     .venv/bin/python tools/stack_images.py OUT.png IN1.png IN2.png ... [--gap PX]
 """
