@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS  # noqa: E402
-from tracer.analysis.hud import erode  # noqa: E402
+from tracer.analysis.sections import erode  # noqa: E402
 from tracer.core.units import luminance, luminance3  # noqa: E402
 from tracer.core.vec import take  # noqa: E402
 from tracer.methods import Budget  # noqa: E402
@@ -93,7 +93,7 @@ class CountingForward(ForwardTracer):
 def analysis_by_order(world, dielectric_name: str):
     """(image mean by order (ORDERS,), background mask (H W,), background mean by order), cd/m^2: the
     background where the chief ray's primary and ghost 1 see black LCD cells, eroded by one pixel
-    (tracer.analysis.hud.erode); the means over PUPIL_GRID^2 rays per pixel (over the pupil and the
+    (tracer.analysis.sections.erode); the means over PUPIL_GRID^2 rays per pixel (over the pupil and the
     pixel's area, tracer.transport.chains.specular_paths), since the pupil blurs the strokes' edges."""
     h, w = world.eye.height, world.eye.width
     depth = 2 * ORDERS + 6

@@ -17,7 +17,7 @@ import numpy as np
 from ..core.units import luminance
 from ..transport.chains import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
 from ..transport.world import World
-from .hud import erode
+from .sections import find_sections
 
 
 def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
@@ -118,9 +118,9 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
 def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.transport.chains`.
 
-    Sections come from the chief rays' dominant chain: "symbol" where its LCD cell is clear,
-    "background" where it is black, or "image" (every pixel the chain reaches) where it has no LCD;
-    all eroded by one grid cell, so edges blurred by the pupil are left out. Up to PUPIL_PIXELS
+    The sections are :mod:`tracer.analysis.sections`' ("symbol" and "background" where the dominant
+    chain crosses an LCD, else "image"), those of the HUD figures. This is a check of the render, not
+    a figure to quote: the symbol luminance is the HUD figures' (``hud.symbol_cd_m2``). Up to PUPIL_PIXELS
     evenly spaced pixels of each section are compared (``pixels``; the section has
     ``section_pixels``): the rendered mean over them against a prediction that follows each of them
     with PUPIL_GRID^2 rays from points over the pupil and the pixel (with its standard error)
@@ -163,31 +163,13 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         out["paths"].append({"path": "other paths", "predicted_mean_cd_m2": float(sum(y.mean() for y in per_path[8:]))})
     if not res["paths"]:
         return out
-    lcd_paths = [p for p in res["paths"] if np.any(np.isfinite(p["lcd"]))]
-    masks = {}
-    grid_lcd = None
-    if lcd_paths:
-        main = lcd_paths[0]
-        grid_lcd = np.full(npts, np.nan)
-        grid_lcd[main["pixel"]] = main["lcd"]
-        grid_lcd = grid_lcd.reshape(grid_h, grid_w)
-        masks["symbol"] = erode(grid_lcd >= 0.5)
-        # Background: black on the dominant chain and on the next one through the LCD (the ghost), so
-        # that the ghost's symbols do not count as black leak. NaN compares False: off the LCD is neither.
-        background = grid_lcd < 0.5
-        for p in lcd_paths[1:2]:
-            other = np.full(npts, np.nan)
-            other[p["pixel"]] = p["lcd"]
-            background &= ~(other.reshape(grid_h, grid_w) >= 0.5)
-        masks["background"] = erode(background)
-    else:
-        reached = np.zeros(npts, bool)
-        reached[res["paths"][0]["pixel"]] = True
-        masks["image"] = erode(reached.reshape(grid_h, grid_w))
+    sections = find_sections(res)
+    lcd_paths, grid_lcd = sections.lcd_paths, sections.lcd
+    if not lcd_paths:
         out["image_path"] = res["paths"][0]["path"]
     blockers = dict(res["specular_blockers"])
     ends = []  # where the sections' pupil rays end, for the aims' coverage
-    for key, mask in masks.items():
+    for key, mask in sections.masks.items():
         idx = np.nonzero(mask.ravel())[0]
         if len(idx) == 0:
             continue
@@ -245,13 +227,6 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         out[key] = entry
     out["valid"] = not out["not_comparable"]
     out["aim_coverage"] = aim_coverage(world, ends)
-    if lcd_paths:
-        out["lcd_contrast_ratio"] = next(o.material.params["contrast_ratio"] for o in world.scene.objects
-                                         if o.material.type == "lcd")
-        if "symbol" in out and "background" in out:
-            out["symbol_over_contrast_ratio_cd_m2"] = out["symbol"]["rendered_cd_m2"] / out["lcd_contrast_ratio"]
-            out["rendered_contrast"] = (out["symbol"]["rendered_cd_m2"] / out["background"]["rendered_cd_m2"]
-                                        if out["background"]["rendered_cd_m2"] > 0 else None)
     if len(lcd_paths) > 1:
         main, ghost = lcd_paths[0], lcd_paths[1]
         main_y = luminance(main["luminance"])

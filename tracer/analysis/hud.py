@@ -1,21 +1,29 @@
 """The figures an HUD engineer reads off an image: symbol luminance, the background behind the symbols,
 the rear-projection spot, and the contrast ratio (paper sec. 4.1: the spot "seriously worsens the
 conditions for observing the real environment"; the LED luminance is chosen for "the minimum possible
-contrast" of the spot and the "maximum contrast" of the symbols).
+contrast" of the spot and the "maximum contrast" of the symbols). Every command reports these: the
+report's ``hud`` block, ``hud-trace readouts``, Blender's HUD Readouts, a sweep's ``hud.*`` keys.
 
-The display region is where the eye's chief rays reach the display through its specular optics (the
-dominant chain of :func:`tracer.transport.chains.specular_paths`: through the LCD, or ending on the screen),
-eroded by one analysis cell. Inside it, the symbols are the pixels above SYMBOL_SHARE of the display's
-99th percentile (an LCD's clear and black cells differ by its contrast ratio); among the rest, the
-most populous mode of the log luminance is the black leak, and darker modes a decade or more below
-it (a screen's margin that the LCD's image does not reach) are left out as unlit (modes by Otsu's
-threshold for three classes, classes whose means lie within a decade merged; Otsu 1979,
-doi:10.1109/TSMC.1979.4310076). The split does not depend on the method, so every method
-is judged on one table.
+Symbols and background are the pixels of :mod:`tracer.analysis.sections`, found from the eye's chief rays
+on the HUD's light alone, so that every method is judged on one table:
 
-- ``symbol_cd_m2``, ``background_cd_m2``: means over the symbol pixels eroded by one pixel and the
-  background pixels eroded by BACKGROUND_EROSION (edges blurred by the pupil and the photon gather
-  are left out);
+- where the dominant chain crosses an LCD (``symbol_pixels_from`` "lcd_cells"), the symbols are the
+  pixels whose chain crosses a clear cell, the background those whose chain and ghost chain cross black
+  cells, both eroded by one analysis cell;
+- where the eye sees the display only through a scattering screen (``"luminance_threshold"``: the LCD
+  lies before the screen, out of the chains' reach), the symbols are the pixels of the display region
+  above SYMBOL_SHARE of its 99th percentile (an LCD's clear and black cells differ by its contrast
+  ratio) eroded by one pixel; among the rest, the most populous mode of the log luminance is the black
+  leak, and darker modes a decade or more below it (a screen's margin that the LCD's image does not
+  reach) are left out as unlit (modes by Otsu's threshold for three classes, classes whose means lie
+  within a decade merged; Otsu 1979, doi:10.1109/TSMC.1979.4310076); the background is eroded by
+  BACKGROUND_EROSION pixels, away from the halo that the pupil's blur and a photon gather spread around
+  every symbol.
+
+The figures:
+
+- ``symbol_cd_m2``, ``background_cd_m2``: the mean apparent luminance over the symbol and background
+  pixels: the symbol luminance and the background luminance;
 - ``contrast_ratio``: CR = (L_sym + L_bg) / L_bg (the paper's and ISO 15008's form);
 - ``spot``: the background smoothed over a window of ``SPOT_WINDOW`` of the display's width (a
   normalised box filter over background pixels only): its peak (cd/m^2), the peak over the
@@ -43,6 +51,7 @@ import math
 import numpy as np
 
 from ..transport.chains import specular_paths
+from .sections import Sections, erode, find_sections
 
 #: Window of the spot's smoothing, as a share of the display's width in pixels.
 SPOT_WINDOW = 0.08
@@ -53,13 +62,6 @@ SYMBOL_SHARE = 0.1
 BACKGROUND_EROSION = 3
 #: Log-luminance histogram bins for Otsu's threshold.
 BINS = 256
-
-
-def erode(mask: np.ndarray, border_inside: bool = False) -> np.ndarray:
-    """Binary erosion of a 2D mask with the 3 x 3 cross; the image border counts as outside the mask,
-    or (``border_inside``) as continuing it (a display that fills the view keeps its edge pixels)."""
-    m = np.pad(mask, 1, mode="edge") if border_inside else np.pad(mask, 1, constant_values=False)
-    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
 
 
 def log_modes(logv: np.ndarray) -> list[float]:
@@ -100,48 +102,14 @@ def _box_mean(values: np.ndarray, weights: np.ndarray, k: int) -> np.ndarray:
     return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
 
 
-def display_mask(world) -> np.ndarray | None:
-    """(H, W) bool: pixels whose chief ray reaches the display along the dominant specular chain (the
-    one through the LCD, else the brightest), eroded by one analysis cell; None where no chain does."""
-    res = specular_paths(world, environment=False)
-    paths = res["paths"]
-    if not paths:
-        return None
-    through_lcd = [p for p in paths if np.any(np.isfinite(p["lcd"]))]
-    main = (through_lcd or paths)[0]
-    gh, gw = res["grid"]
-    grid = np.zeros(gh * gw, bool)
-    grid[main["pixel"]] = True
-    grid = erode(grid.reshape(gh, gw), border_inside=True)
-    s = res["stride"]
-    eye = world.eye
-    full = np.kron(grid, np.ones((s, s), bool))
-    out = np.zeros((eye.height, eye.width), bool)
-    # grid cell (j, i) is centred on pixel (j s + s // 2, i s + s // 2): cells span [j s, j s + s)
-    h, w = min(full.shape[0], eye.height), min(full.shape[1], eye.width)
-    out[:h, :w] = full[:h, :w]
-    return out
-
-
-def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> dict | None:
-    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye (with
-    ``environment``, ``y`` is the HUD channel alone and ``environment`` the environment channel's image);
-    None where the eye sees no display."""
-    mask = display_mask(world)
-    if mask is None or mask.sum() < 16:
-        return None
-    eye = world.eye
+def _threshold_masks(y: np.ndarray, mask: np.ndarray, out: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """(symbols, background) of the display region ``mask`` by the luminance threshold of the module
+    docstring, both eroded; None (with a note in ``out``) where the display has no dark cells."""
     vals = y[mask]
     pos = vals[vals > 0]
-    out: dict = {"display_pixels": int(mask.sum())}
-    if len(pos) < 16:
-        out["note"] = "the display region is dark"
-        return out
     top = float(np.percentile(pos, 99))
     if np.percentile(pos, 5) > SYMBOL_SHARE * top:  # no dark cells: one mode, nothing to tell apart
-        out["note"] = "the display is uniform (no symbols and background to tell apart)"
-        out["display_cd_m2"] = float(vals.mean())
-        return out
+        return None
     t = SYMBOL_SHARE * top
     sym = mask & (y >= t)
     bg = mask & (y < t)
@@ -154,24 +122,61 @@ def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> 
             unlit = bg & (y < 10 ** cuts[main - 1])
             out["unlit_pixels"] = int(unlit.sum())
             bg &= ~unlit
-    # Symbols eroded by one pixel; the background by BACKGROUND_EROSION, away from the halo that the
-    # pupil's blur and a photon gather's radius spread around every symbol.
+    out["symbol_threshold_cd_m2"] = t
     sym_in, bg_in = erode(sym, border_inside=True), bg
     for _ in range(BACKGROUND_EROSION):
         bg_in = erode(bg_in, border_inside=True)
-    l_sym = float(y[sym_in].mean()) if sym_in.any() else float(y[sym].mean())
-    l_bg = float(y[bg_in].mean()) if bg_in.any() else (float(y[bg].mean()) if bg.any() else 0.0)
-    out |= {"symbol_threshold_cd_m2": t, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
+    return (sym_in if sym_in.any() else sym), (bg_in if bg_in.any() else bg)
+
+
+def hud_sections(world) -> Sections:
+    """The sections of the HUD's own light (the environment left out: the display is what the HUD's
+    chains reach, whatever lies behind it)."""
+    return find_sections(specular_paths(world, environment=False))
+
+
+def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None,
+                sections: Sections | None = None) -> dict | None:
+    """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye (with
+    ``environment``, ``y`` is the HUD channel alone and ``environment`` the environment channel's image);
+    None where the eye sees no display. ``sections`` (:func:`hud_sections`) may be given when known."""
+    sections = hud_sections(world) if sections is None else sections
+    if sections.display is None:
+        return None
+    mask = sections.pixels(sections.display, y.shape, fill=True)
+    if mask.sum() < 16:
+        return None
+    eye = world.eye
+    vals = y[mask]
+    out: dict = {"display_pixels": int(mask.sum())}
+    if np.count_nonzero(vals > 0) < 16:
+        out["note"] = "the display region is dark"
+        return out
+    if "symbol" in sections.masks:
+        sym, bg = (sections.pixels(sections.masks[k], y.shape) for k in ("symbol", "background"))
+        found = "lcd_cells" if sym.any() and bg.any() else None
+        area = sections.stride ** 2  # the pixels a followed chief ray stands for
+    else:
+        area = 1
+        masks = _threshold_masks(y, mask, out)
+        sym, bg = masks if masks is not None else (None, None)
+        found = "luminance_threshold" if masks is not None else None
+    if found is None:
+        out["note"] = "the display is uniform (no symbols and background to tell apart)"
+        out["display_cd_m2"] = float(vals.mean())
+        return out
+    l_sym = float(y[sym].mean())
+    l_bg = float(y[bg].mean())
+    out |= {"symbol_pixels_from": found, "symbol_pixels": int(sym.sum()), "background_pixels": int(bg.sum()),
             "symbol_cd_m2": l_sym, "background_cd_m2": l_bg,
             "contrast_ratio": (l_sym + l_bg) / l_bg if l_bg > 0 else None}
     if environment is not None:
-        behind = float(environment[sym_in].mean()) if sym_in.any() else float(environment[sym].mean())
+        behind = float(environment[sym].mean())
         l_b = behind + l_bg
         out |= {"environment_behind_symbols_cd_m2": behind, "background_behind_symbols_cd_m2": l_b,
                 "hud_contrast_ratio": out["contrast_ratio"],
                 "contrast_ratio": (l_sym + l_b) / l_b if l_b > 0 else None}
-    if bg_in.sum() >= 16 and l_bg > 0:
-        bg = bg_in
+    if bg.sum() >= 16 and l_bg > 0:
         cols = np.flatnonzero(mask.any(axis=0))
         k = max(1, int(round(SPOT_WINDOW * (cols[-1] - cols[0] + 1) / 2)))
         smooth = _box_mean(np.where(bg, y, 0.0), bg.astype(np.float64), k)
@@ -180,7 +185,7 @@ def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> 
         at = np.unravel_index(int(np.argmax(smooth)), smooth.shape)
         half = bg & (smooth >= 0.5 * peak)
         px_sr = (2 * eye.half_x / eye.focal / eye.width) * (2 * eye.half_y / eye.focal / eye.height)
-        diameter = 2 * math.degrees(math.sqrt(half.sum() * px_sr / math.pi))
+        diameter = 2 * math.degrees(math.sqrt(half.sum() * area * px_sr / math.pi))
         median = float(np.median(y[bg]))
         out["spot"] = {"peak_cd_m2": peak, "peak_pixel": [int(at[1]), int(at[0])],
                        "peak_over_median_background": peak / median if median > 0 else None,
@@ -191,5 +196,3 @@ def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None) -> 
             out["spot"] |= {"environment_cd_m2": env,
                             "contrast_against_environment": (env + peak) / env if env > 0 else None}
     return out
-
-

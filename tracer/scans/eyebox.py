@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis.brightness import SPECULAR_SHARE, per_pixel
-from ..analysis.hud import erode
+from ..analysis.sections import erode
 from ..products.falsecolour import (
     GLYPH_H,
     INK,

@@ -1,0 +1,108 @@
+"""The image's sections by what the eye's chief rays reach along their dominant specular chain (the
+chains of :func:`tracer.transport.chains.specular_paths` on the analysis grid): one set of pixel masks
+for every figure that speaks of symbols or background, the HUD figures (:mod:`.hud`) and the
+brightness-theorem comparison (:mod:`.brightness`) alike.
+
+- Where the dominant chain crosses an LCD (a direct HUD: the eye sees the LCD through the mirror and
+  the windshield), "symbol" is the pixels whose chain crosses a clear cell, eroded by one grid cell so
+  that stroke edges blurred by the pupil are left out: the stroke interiors a luminance meter aimed at a
+  stroke reads, the ghost included where it overlaps them. "background" is the pixels whose chain and
+  next chain through the LCD (the windshield's ghost) both cross black cells, so that the ghost's
+  symbols do not count as black leak, at least BACKGROUND_MARGIN_PX pixels from any other: the black
+  level away from the halo that the pupil spreads around every stroke.
+- Otherwise (the eye sees a screen, a diffuser or an emitter: no LCD can be followed through a scattering
+  surface), "image" is every pixel the brightest chain reaches, eroded by one grid cell.
+- "display" is where the dominant chain (through the LCD, else the brightest) reaches, eroded by one grid
+  cell with the image's border counted as inside (a display that fills the view keeps its edge).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The background's distance from the symbols' edges (and the display's), pixels: the pupil's blur of a
+#: stroke, a pixel or two on the presets, is left out of the black level.
+BACKGROUND_MARGIN_PX = 3
+
+
+def erode(mask: np.ndarray, border_inside: bool = False) -> np.ndarray:
+    """Binary erosion of a 2D mask with the 3 x 3 cross; the image border counts as outside the mask,
+    or (``border_inside``) as continuing it (a display that fills the view keeps its edge pixels)."""
+    m = np.pad(mask, 1, mode="edge") if border_inside else np.pad(mask, 1, constant_values=False)
+    return m[1:-1, 1:-1] & m[:-2, 1:-1] & m[2:, 1:-1] & m[1:-1, :-2] & m[1:-1, 2:]
+
+
+@dataclass
+class Sections:
+    """Grid masks (gh, gw) of the sections of the module docstring, and what they were made from.
+
+    chains : the :func:`~tracer.transport.chains.specular_paths` result they come from.
+    masks : {"symbol", "background"} where the dominant chain crosses an LCD, else {"image"}.
+    display : where the dominant chain reaches (eroded, border inside), or None where no chain does.
+    lcd : (gh, gw) the clear fraction of the LCD cell on the dominant chain (NaN off the LCD), or None.
+    lcd_paths : the chains that cross an LCD, brightest first (the primary image, then its ghost).
+    """
+
+    chains: dict
+    masks: dict[str, np.ndarray]
+    display: np.ndarray | None
+    lcd: np.ndarray | None
+    lcd_paths: list[dict]
+
+    @property
+    def grid(self) -> tuple[int, int]:
+        return self.chains["grid"]
+
+    @property
+    def stride(self) -> int:
+        return self.chains["stride"]
+
+    def pixels(self, mask: np.ndarray, shape: tuple[int, int], fill: bool = False) -> np.ndarray:
+        """A grid mask as an (H, W) pixel mask of the image ``shape``: grid cell (j, i) is the chief ray
+        of pixel (j s + s // 2, i s + s // 2), s the stride; with ``fill`` the cell covers rows j s to
+        j s + s - 1 and the same columns (a region), else only the pixels whose chief rays were followed
+        are marked (what a section is known to hold)."""
+        s = self.stride
+        out = np.zeros(shape, bool)
+        if fill:
+            full = np.kron(mask, np.ones((s, s), bool))
+            h, w = min(full.shape[0], shape[0]), min(full.shape[1], shape[1])
+            out[:h, :w] = full[:h, :w]
+        else:
+            out[s // 2::s, s // 2::s] = mask  # the grid of specular_paths: every s-th pixel from s // 2
+        return out
+
+
+def _on_grid(chains: dict, path: dict) -> np.ndarray:
+    """The chain's LCD cell values on the grid (NaN where it does not reach)."""
+    values = np.full(len(chains["pixels"]), np.nan)
+    values[path["pixel"]] = path["lcd"]
+    return values.reshape(chains["grid"])
+
+
+def find_sections(chains: dict) -> Sections:
+    """The sections of a :func:`~tracer.transport.chains.specular_paths` result on its grid."""
+    paths = chains["paths"]
+    gh, gw = chains["grid"]
+    if not paths:
+        return Sections(chains, {}, None, None, [])
+    lcd_paths = [p for p in paths if np.any(np.isfinite(p["lcd"]))]
+    main = (lcd_paths or paths)[0]
+    reached = np.zeros(gh * gw, bool)
+    reached[main["pixel"]] = True
+    reached = reached.reshape(gh, gw)
+    display = erode(reached, border_inside=True)
+    if not lcd_paths:
+        return Sections(chains, {"image": erode(reached)}, display, None, [])
+    lcd = _on_grid(chains, main)
+    # NaN compares False: off the LCD is neither symbol nor background.
+    background = lcd < 0.5
+    for ghost in lcd_paths[1:2]:
+        background &= ~(_on_grid(chains, ghost) >= 0.5)
+    for _ in range(math.ceil(BACKGROUND_MARGIN_PX / chains["stride"])):
+        background = erode(background)
+    masks = {"symbol": erode(lcd >= 0.5), "background": background}
+    return Sections(chains, masks, display, lcd, lcd_paths)
