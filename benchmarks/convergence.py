@@ -38,6 +38,7 @@ from benchmarks.throughput import VARIANTS, make, set_polarisation  # noqa: E402
 from presets import PRESETS, SINGLE_METHOD  # noqa: E402
 from tracer.core.units import luminance  # noqa: E402
 from tracer.methods import INTEGRATORS, Budget  # noqa: E402
+from tracer.products import charts  # noqa: E402
 from tracer.runtime.allocator import keep_freed_memory  # noqa: E402
 from tracer.runtime.parallel import render_parallel  # noqa: E402
 from tracer.scene import load_scene  # noqa: E402
@@ -171,15 +172,13 @@ def charted(row: dict) -> bool:
 
 
 def chart(name: str, rows: list[dict], ref: dict):
-    """docs/images/convergence-<name>.png: one line per method in ``rows`` (in their order), rows that cannot
-    render left out (named in the legend); the tracer's methods in solid lines, peers (Mitsuba) dashed
-    with triangles; the reference's own noise as a horizontal line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    """docs/images/convergence-<name>.png, in the charts' style (tracer.products.charts): one line per
+    method in ``rows`` (in their order), rows that cannot render left out (named in the legend); the
+    tracer's methods in solid lines, peers (Mitsuba) dashed with triangles; the reference's own noise as
+    a horizontal line."""
+    fig, _canvas = charts.new_figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    charts.style(ax, log_x=True, log_y=True)
     methods = list(dict.fromkeys(x["method"] for x in rows))
     for i, method in enumerate(methods):
         r = [x for x in rows if x["method"] == method and charted(x)]
@@ -193,20 +192,18 @@ def chart(name: str, rows: list[dict], ref: dict):
         er = np.array([x["rel_rmse_region"] for x in r])
         color = f"C{i}"
         ours = method in VARIANTS
-        ax.loglog(t, e, "o-" if ours else "^--", color=color, label=f"{method}: whole image")
-        ax.loglog(t, er, "s:" if ours else "v:", color=color, label=f"{method}: bright region")
-        ax.loglog(t, e[0] * (t / t[0]) ** -0.5, "--", color="0.6", lw=0.8)
+        ax.plot(t, e, "o-" if ours else "^--", color=color, label=f"{method}: whole image")
+        ax.plot(t, er, "s:" if ours else "v:", color=color, label=f"{method}: bright region")
+        ax.plot(t, e[0] * (t / t[0]) ** -0.5, "--", color="0.6", lw=0.8)
     ax.axhline(noise_floor(ref), color="0.5", ls="-.", lw=0.8, label="reference's own noise (whole image)")
-    ax.set_xlabel("wall time, s (one process, one thread)")
-    ax.set_ylabel("relative RMSE against the reference")
+    ax.set_xlabel(charts.label("wall time (one process, one thread)", "s"))
+    ax.set_ylabel(charts.label("relative RMSE against the reference", "1"))
     ax.set_title(f"{name}: reference {str(ref['method'])} {float(ref['seconds']):.0f} s, "
-                 f"{int(ref['rays']):,} rays; grey: slope -1/2", fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+                 f"{int(ref['rays']):,} rays; grey: slope -1/2", loc="left")
+    ax.legend(fontsize=charts.FONT_PT - 2)
     fig.tight_layout()
     DOCS.mkdir(parents=True, exist_ok=True)
-    fig.savefig(DOCS / f"convergence-{name}.png", dpi=110)
-    plt.close(fig)
+    fig.savefig(DOCS / f"convergence-{name}.png")
 
 
 def summary_table(rows_by_preset: dict[str, list[dict]], budget: float) -> list[str]:

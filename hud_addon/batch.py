@@ -99,8 +99,7 @@ def _render(args, blend: Path, outputs) -> int:
     import numpy as np
 
     from tracer.core.imageio import read_exr_channels
-    from tracer.products.falsecolour import png_file
-    from tracer.products.outputs import OutputFile, OutputWriteError
+    from tracer.products.outputs import OutputFile, OutputWriteError, png_file
     from tracer.products.report import finite_json
 
     tmp = Path(tempfile.mkdtemp(prefix="hud-render-"))

@@ -32,7 +32,8 @@ from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerErro
 from ..tracer.core.units import Y_WEIGHTS
 from ..tracer.core.validate import WorkersError, check_workers
 from ..tracer.methods import INTEGRATORS, Budget
-from ..tracer.products.falsecolour import false_colour, png_file, write_as_set
+from ..tracer.products.falsecolour import false_colour
+from ..tracer.products.outputs import png_file, write_as_set
 from ..tracer.products.render import render_products, run_render
 from ..tracer.products.report import finite_json
 from ..tracer.scene import load_scene

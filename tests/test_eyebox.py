@@ -14,10 +14,9 @@ from conftest import ROOT
 from presets._build import SceneBuilder, frame_bars, frame_matrix, rectangle
 from tracer.analysis.brightness import brightness_theorem
 from tracer.core.imageio import read_image, write_png
-from tracer.products.falsecolour import colour_map
+from tracer.products.charts import THRESHOLD, colours
 from tracer.scans.eyebox import (
     FIELD_POINTS,
-    OUTLINE,
     FieldNotFound,
     ScanArgumentError,
     display_field,
@@ -157,28 +156,43 @@ def test_the_csv_round_trips(framed, tmp_path):
     assert sorted(p.name for p in path.parent.iterdir()) == ["eyebox.csv"]
 
 
+def _rgb(hex_colour: str) -> np.ndarray:
+    return np.array([int(hex_colour[k:k + 2], 16) for k in (1, 3, 5)])
+
+
 def test_the_chart_shows_each_offsets_relative_luminance_the_outline_and_the_design_eye(framed):
+    """At every offset's centre the map shows the colour of its relative luminance; every edge between a
+    cell inside the eyebox and one outside is drawn red, no cell centre but the design eye's is."""
     _, _, r = framed
-    rgb = eyebox_chart(r)
-    red = np.all(rgb == OUTLINE, axis=2)
-    rows, cols = np.nonzero(red)
+    rgb, geo = eyebox_chart(r)
+    cols, rows = geo["cells"]["right_mm"], geo["cells"]["up_mm"]
     region = r.region
-    rr, cc = np.nonzero(region[::-1])  # the chart's row 0 is the highest offset
-    # The outline's extent is the region's: its cells' size and the map's origin follow from it.
-    cell = (cols.max() - cols.min() + 1) / (cc.max() - cc.min() + 1)
-    assert cell == int(cell) and (rows.max() - rows.min() + 1) == cell * (rr.max() - rr.min() + 1)
-    cell = int(cell)
-    left, top = cols.min() - cc.min() * cell, rows.min() - rr.min() * cell
     ny, nx = region.shape
-    centres = rgb[top + cell // 2:top + ny * cell:cell, left + cell // 2:left + nx * cell:cell][::-1]
-    expected = colour_map(r.relative / max(1.0, math.ceil(10 * r.relative.max()) / 10))
+
+    def at(x, y):
+        return rgb[int(round(y)), int(round(x))].astype(int)
+
+    centres = np.array([[at(cols[i], rows[j]) for i in range(nx)] for j in range(ny)])
+    expected = colours(r.relative / geo["top_of_scale"]).astype(int)
     j0, i0 = r.design_index
     off = np.ones(region.shape, bool)
     off[j0, i0] = False  # the design eye's cross covers its centre
-    np.testing.assert_array_equal(centres[off], expected[off])
-    assert np.all(centres[j0, i0] == OUTLINE)
-    assert not red[top:top + ny * cell, left:left + nx * cell][~np.kron(region[::-1], np.ones((cell, cell),
-                                                                                             bool))].any()
+    assert np.abs(centres[off] - expected[off]).max() <= 1
+    red = _rgb(THRESHOLD)
+    assert np.abs(centres[j0, i0] - red).max() <= 40
+    assert not np.any(np.all(np.abs(centres[off] - red) <= 40, axis=-1))
+    edges = 0
+    for j in range(ny):
+        for i in range(nx - 1):
+            if region[j, i] != region[j, i + 1]:
+                assert np.abs(at((cols[i] + cols[i + 1]) / 2, rows[j]) - red).max() <= 40, (j, i)
+                edges += 1
+    for j in range(ny - 1):
+        for i in range(nx):
+            if region[j, i] != region[j + 1, i]:
+                assert np.abs(at(cols[i], (rows[j] + rows[j + 1]) / 2) - red).max() <= 40, (j, i)
+                edges += 1
+    assert edges >= 4
 
 
 def test_a_screen_lit_through_a_projection_lens_is_not_valid_and_says_why(preset):
@@ -219,7 +233,7 @@ def test_command_line_writes_the_set_and_refuses_bad_input(framed, tmp_path):
     assert summary["field"]["from_scene"] is True
     np.testing.assert_array_equal(read_csv(out / "eyebox.csv")["luminance_cd_m2"], r.luminance_cd_m2)
     png = np.rint(read_image(out / "eyebox.png", linear=True) * 255).astype(np.uint8)
-    np.testing.assert_array_equal(png, eyebox_chart(r))
+    np.testing.assert_array_equal(png, eyebox_chart(r)[0])
     assert f"eyebox {r.figures()['width_mm']:.1f} x {r.figures()['height_mm']:.1f} mm" in res.stderr
 
     (tmp_path / "file").write_text("x")

@@ -321,7 +321,8 @@ def check_false_colour_args(args):
 
 def cmd_false_colour(args) -> int:
     from .core.errors import ImageReadError
-    from .products.falsecolour import luminance_range, read_luminance, save_false_colour
+    from .core.imageio import read_luminance
+    from .products.falsecolour import luminance_range, save_false_colour
     from .products.outputs import OutputFolderError, OutputWriteError
 
     try:

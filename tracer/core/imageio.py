@@ -1,4 +1,5 @@
-"""Image files: reading panoramas and textures, writing EXR results and PNG previews.
+"""Image files: reading panoramas and textures, writing EXR results and PNG previews, reading a
+render's luminance back.
 
 All file access goes through OpenImageIO (https://openimageio.readthedocs.io). Arrays are
 indexed ``[row, column, channel]`` with row 0 the TOP row of the image, as files store it.
@@ -20,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from .errors import ImageReadError
+from .errors import ImageReadError, SceneError
+from .units import luminance
 
 #: OpenImageIO base types of files whose values are linear (returned as stored by default).
 _FLOAT_BASETYPES = (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
@@ -283,3 +285,44 @@ def write_png(path, rgb8: np.ndarray) -> None:
     spec = oiio.ImageSpec(rgb8.shape[1], rgb8.shape[0], 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
     _write_atomically(path, "png", spec, np.ascontiguousarray(rgb8))
+
+
+#: The first four bytes of every OpenEXR file (the OpenEXR file layout, "magic number").
+EXR_MAGIC = bytes((0x76, 0x2F, 0x31, 0x01))
+
+
+def read_luminance(path) -> np.ndarray:
+    """The luminance Y (H, W) cd/m^2 of an image.exr written by the tracer: its Y channel, or
+    Y = 0.2126 R + 0.7152 G + 0.0722 B (:func:`tracer.core.units.luminance`) where it has none.
+
+    Raises :class:`~tracer.core.errors.SceneError` naming the file, and the channel where one is at
+    fault, for a file that is missing, not an OpenEXR file, without Y nor R, G and B, or holding
+    non-finite values; :class:`~tracer.core.errors.ImageReadError` for one OpenImageIO cannot read."""
+    p = Path(path)
+    if not p.is_file():
+        raise SceneError(str(path), "", "no such file" if not p.exists() else "is not a file")
+    try:
+        with open(p, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as e:
+        raise SceneError(str(path), "", f"cannot be read ({e.strerror or e})") from None
+    if magic != EXR_MAGIC:
+        raise SceneError(str(path), "", "is not an OpenEXR file (the false-colour view reads the luminance of an "
+                                        "image.exr written by hud-trace render)")
+    channels, _ = read_exr_channels(p)
+    if "Y" in channels:
+        name, y = "Y", channels["Y"]
+    elif {"R", "G", "B"} <= set(channels):
+        name, y = "R, G, B", luminance(np.stack([channels[c] for c in "RGB"], axis=-1))
+    else:
+        have = ", ".join(sorted(channels)) or "none"
+        raise SceneError(str(path), "channels", f"has no Y channel, nor R, G and B to make it from (its channels: "
+                                                f"{have})")
+    if not np.all(np.isfinite(y)):
+        raise SceneError(str(path), name, "holds non-finite values (NaN or Inf)")
+    y = np.asarray(y, dtype=np.float64)
+    low, high = float(y.min()), float(y.max())
+    if low < -1e-6 * max(high, 0.0):  # rounding (a denoiser's, a colour transform's) is tolerated
+        raise SceneError(str(path), name, f"holds negative luminance (down to {low:.4g} cd/m^2): not a luminance "
+                                          "image")
+    return y

@@ -30,7 +30,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ..core.errors import TracerError, one_line, printable
+from ..core.imageio import read_image, write_png
 
 try:
     import fcntl
@@ -300,3 +303,28 @@ def replace_folder(staging: Path, target: Path) -> Path | None:
     except OSError:
         return backup
     return None
+
+
+def write_as_set(path, write, check) -> None:
+    """Write one file as a set of one (:class:`tracer.products.outputs.OutputSet`): its folder is checked and
+    locked, the file written beside it in a staging folder, read back by ``check(staged_path)``
+    and only then moved onto ``path``. Raises :class:`~tracer.products.outputs.OutputFolderError` when the
+    folder cannot take it, :class:`~tracer.products.outputs.OutputWriteError` when writing fails (``path``
+    then keeps what it held)."""
+    path = Path(path)
+    outputs = OutputSet(path.parent, (path.name,)).open()
+    try:
+        outputs.commit([OutputFile(path.name, write, check)])
+        outputs.keep()
+    finally:
+        outputs.close()
+
+
+def png_file(name: str, rgb: np.ndarray) -> OutputFile:
+    """An 8-bit PNG of ``rgb`` as a file of a set, checked by reading its pixels back."""
+    def check(p):
+        back = np.rint(read_image(p, linear=True) * 255.0).astype(np.uint8)
+        if back.shape != rgb.shape or not np.array_equal(back, rgb):
+            raise ValueError("the pixels read back differ from those written")
+
+    return OutputFile(name, lambda p: write_png(p, rgb), check)

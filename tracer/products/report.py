@@ -161,3 +161,21 @@ def readouts(report: dict) -> list[tuple[str, str]]:
                          f"{report['workers']} process{'es' if report['workers'] > 1 else ''})"
                          + (", stopped early" if report["partial"] else "")))
     return rows
+
+
+#: Units of report figures by the end of their name (the report names every physical quantity so).
+UNIT_SUFFIXES = {"_cd_m2": "cd/m^2", "_deg": "deg", "_mm": "mm", "_mrad": "mrad", "_mm2": "mm^2", "_lm": "lm",
+                 "_lx": "lx", "seconds": "s", "_px": "px"}
+#: Units of figures whose names do not end in one.
+UNITS = {"adaptation_luminance": "cd/m^2", "rays": "rays", "paths": "paths", "rays_per_second": "rays/s",
+         "luminance.mean": "cd/m^2", "luminance.max": "cd/m^2", "luminance.log_average": "cd/m^2",
+         "luminance.mean_standard_error": "cd/m^2"}
+
+
+def report_unit(key: str) -> str:
+    """The unit of the report figure at dotted ``key`` (``hud.symbol_cd_m2``: "cd/m^2"); "1" for ratios
+    and shares."""
+    if key in UNITS:
+        return UNITS[key]
+    last = key.rsplit(".", 1)[-1]
+    return next((u for end, u in UNIT_SUFFIXES.items() if last.endswith(end)), "1")

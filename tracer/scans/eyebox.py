@@ -39,20 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis.brightness import SPECULAR_SHARE, per_pixel
-from ..analysis.sections import erode
-from ..products.falsecolour import (
-    GLYPH_H,
-    INK,
-    PAPER,
-    colour_legend,
-    colour_map,
-    draw_text,
-    legend_space,
-    png_file,
-    text_size,
-    write_as_set,
-)
-from ..products.outputs import OutputFile
+from ..products import charts
+from ..products.outputs import OutputFile, png_file, write_as_set
 from ..products.report import finite_json
 from ..scene import Scene
 from ..transport.chains import specular_paths
@@ -67,8 +55,6 @@ CORNER = 0.8
 MAX_OFFSETS = 20_000
 #: Files of :func:`output_files`, in the output folder.
 OUTPUT_NAMES = ("eyebox.csv", "eyebox.png", "eyebox.json")
-#: The outline of the eyebox and the design eye's mark in the chart.
-OUTLINE = (230, 0, 0)
 
 
 class FieldNotFound(ValueError):
@@ -491,78 +477,12 @@ def _caption(result: EyeboxResult) -> str:
     return "not valid: no light at the design eye"
 
 
-def eyebox_chart(result: EyeboxResult, scale: int = 2) -> np.ndarray:
-    """The eyebox chart, (H, W, 3) uint8 sRGB: a heat map over the grid of eye offsets of the least
-    relative luminance (:attr:`EyeboxResult.relative`, in % of design) through the colour map of
-    :mod:`tracer.products.falsecolour` (black where nothing can be compared: a result that is not valid), the
-    eyebox's outline and the design eye's cross in red, the axes in mm (right and up from the
-    design eye), the colour bar with the threshold among its ticks, and a caption with the eyebox's
-    width and height (or why there is none). ``scale``: font pixels per glyph pixel."""
-    s = scale
-    rel = result.relative
-    ny, nx = rel.shape
-    cell = max(4, min(48, 480 // nx, 320 // ny)) * s // 2
-    map_h, map_w = ny * cell, nx * cell
-    top_of_scale = max(1.0, math.ceil(10 * np.nanmax(rel)) / 10) if np.isfinite(rel).any() else 1.0
-    heat = colour_map(np.nan_to_num(rel, nan=0.0) / top_of_scale)
-    heat[~np.isfinite(rel)] = (0, 0, 0)
-    heat = np.repeat(np.repeat(heat[::-1], cell, axis=0), cell, axis=1)  # row 0: the highest offset
-    # The eyebox's outline: its border pixels, lw thick, inside it; the design eye's cross.
-    lw = max(2, cell // 8)
-    region = np.repeat(np.repeat(result.region[::-1], cell, axis=0), cell, axis=1)
-    core = region
-    for _ in range(lw):
-        core = erode(core)
-    heat[region & ~core] = OUTLINE
-    j0, i0 = result.design_index
-    cy, cx = (ny - 1 - j0) * cell + cell // 2, i0 * cell + cell // 2
-    arm = max(3, cell // 2)
-    heat[cy - lw // 2:cy + (lw + 1) // 2, max(cx - arm, 0):cx + arm + 1] = OUTLINE
-    heat[max(cy - arm, 0):cy + arm + 1, cx - lw // 2:cx + (lw + 1) // 2] = OUTLINE
-
-    # Layout: caption band; the up axis' title, its labels, the map, the legend; the right axis below.
-    text_h = text_size("0", s)[0]
-    up_ = (GLYPH_H * s) // 2  # rows of a label above the row it is centred on
-    margin, tick = 3 * s, 2 * s
-    caption = _caption(result)
-    xlab = [f"{v:g}" for v in result.right_mm]
-    zlab = [f"{v:g}" for v in result.up_mm]
-    left = margin + text_h + 2 * s + max(text_size(t, s)[1] for t in zlab) + s + tick
-    space_above, space_below = legend_space(s)
-    caption_h = margin + text_h + s
-    top = caption_h + max(margin, space_above)
-    height = top + map_h + max(tick + s + 2 * text_h + 2 * s + margin, space_below)
-    ticks = [(v / top_of_scale, f"{round(100 * v)}") for v in np.arange(0, top_of_scale + 1e-9, 0.25)]
-    if all(abs(t * top_of_scale - result.threshold) > 1e-9 for t, _ in ticks):
-        ticks.append((result.threshold / top_of_scale, f"{100 * result.threshold:.3g}"))
-    panel, _ = colour_legend(height, top, top + map_h, ticks, "% design", s)
-    width = max(left + map_w + 2 * s + panel.shape[1], margin + text_size(caption, s)[1] + margin)
-    canvas = np.empty((height, width, 3), np.uint8)
-    canvas[:] = PAPER
-    canvas[top:top + map_h, left:left + map_w] = heat
-    canvas[:, left + map_w + 2 * s:left + map_w + 2 * s + panel.shape[1]] = panel
-    draw_text(canvas, caption, margin, margin + up_, s)
-    # Axes: a tick and a label every k offsets from the design eye, k the fewest that keeps labels apart.
-    kx = math.ceil((max(text_size(t, s)[1] for t in xlab) + 3 * s) / cell)
-    for i in np.flatnonzero((np.arange(nx) - i0) % kx == 0):
-        c = left + i * cell + cell // 2
-        canvas[top + map_h:top + map_h + tick, c - s // 2:c + (s + 1) // 2] = INK
-        draw_text(canvas, xlab[i], c, top + map_h + tick + s + up_, s, anchor="centre")
-    kz = math.ceil((text_h + s) / cell)
-    for j in np.flatnonzero((np.arange(ny) - j0) % kz == 0):
-        r = top + (ny - 1 - j) * cell + cell // 2
-        canvas[r - s // 2:r + (s + 1) // 2, left - tick:left] = INK
-        draw_text(canvas, zlab[j], left - tick - s, r, s, anchor="right")
-    draw_text(canvas, "right (mm)", left + map_w // 2, top + map_h + tick + s + text_h + 2 * s + up_, s,
-              anchor="centre")
-    strip = np.empty((text_h, text_size("up (mm)", s)[1], 3), np.uint8)  # the up axis' title, turned
-    strip[:] = PAPER
-    draw_text(strip, "up (mm)", 0, up_, s)
-    turned = np.rot90(strip)
-    r0 = max(top + map_h // 2 - turned.shape[0] // 2, 0)
-    r1 = min(r0 + turned.shape[0], height)
-    canvas[r0:r1, margin:margin + text_h] = turned[:r1 - r0]
-    return canvas
+def eyebox_chart(result: EyeboxResult) -> tuple[np.ndarray, dict]:
+    """eyebox.png (:func:`tracer.products.charts.eyebox_chart`): the least relative luminance of the field
+    points over the grid of eye offsets, the eyebox outlined, the design eye marked, the threshold among
+    the colour bar's ticks, the eyebox's size (or why there is none) in the title."""
+    return charts.eyebox_chart(result.relative, result.region, result.right_mm, result.up_mm, result.threshold,
+                               _caption(result))
 
 
 def output_files(result: EyeboxResult) -> list[OutputFile]:
@@ -574,5 +494,5 @@ def output_files(result: EyeboxResult) -> list[OutputFile]:
         if json.loads(p.read_text()) != json.loads(text):
             raise ValueError("the JSON read back differs from what was written")
 
-    return [_csv_file(result), png_file("eyebox.png", eyebox_chart(result)),
+    return [_csv_file(result), png_file("eyebox.png", eyebox_chart(result)[0]),
             OutputFile("eyebox.json", lambda p: p.write_text(text), check_json)]

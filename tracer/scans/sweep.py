@@ -50,384 +50,37 @@ from __future__ import annotations
 
 import copy
 import csv
-import difflib
 import io
 import itertools
 import json
 import math
-import operator
 import os
 import re
 import shutil
 import uuid
 from dataclasses import dataclass, field, replace
-from fnmatch import fnmatchcase
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
 from ..core.errors import SceneError, StoppedBeforeFirstBatch
-from ..products.falsecolour import FONT, GLYPH_H, INK, PAPER, colour_map, draw_text, png_file, text_size, value_label
-from ..products.outputs import STAGING_PREFIX, OutputFile, OutputFolderError, OutputSet, OutputWriteError
+from ..products import charts
+from ..products.outputs import STAGING_PREFIX, OutputFile, OutputFolderError, OutputSet, OutputWriteError, png_file
 from ..products.render import render_scene
-from ..products.report import REPORT_SECTIONS, finite_json
+from ..products.report import finite_json, report_unit
 from ..scene import SCENE_FILE, Scene, load_scene
-from ..sources.lights import EMISSION
+from .fields import MAX_RUNS, SweepArgumentError, SweepField, field_unit, lookup, parse_field, parse_set, path_text
+from .requirements import Requirement, check_report_key, parse_requirement, run_figures
 
-#: Most runs a sweep may have: a grid of about 8 x 8 x 8. Each run writes its images (1.5 MB for
-#: hud-direct), and every grid point's scene is loaded before the first ray (0.2 s each for hud-direct).
-MAX_RUNS = 500
 #: Most panels of the chart (``--y`` keys, or the required figures' keys: the first ones are drawn).
 MAX_PANELS = 8
 #: The sweep's files in the output folder, beside the runs folder.
 OUTPUT_NAMES = ("sweep.csv", "sweep.json", "sweep.png")
 RUNS = "runs"
-#: Comparison operators of a requirement.
-OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt}
 #: The chart's panels when neither ``--y`` nor ``--require`` names any: the symbols' luminance and the
 #: contrast ratio (tracer.analysis.hud).
 DEFAULT_Y = ("hud.symbol_cd_m2", "hud.contrast_ratio")
-#: The parts of a report whose numeric leaves are a run's figures (sweep.csv's columns), in order.
-FIGURES = ("hud", "luminance", "adaptation_luminance", "noise", "rays", "seconds", "efficiency")
-#: Relative distance to an integer within which a value of an integer field is that integer (geometric
-#: values are rounded by the floating-point powers).
-INTEGER_TOLERANCE = 1e-9
-
-
-class SweepArgumentError(ValueError):
-    """A sweep argument that cannot be run: ``argument`` names it (``--set FIELD=...``), ``message``
-    says why."""
-
-    def __init__(self, argument: str, message: str):
-        self.argument, self.message = argument, message
-        super().__init__(f"{argument}: {message}")
-
-
-# -- paths into JSON ----------------------------------------------------------------------------------
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-#: Marks a block or field that the scene does not hold yet.
-MISSING = object()
-
-
-def parse_field(text: str, globs: bool = True) -> tuple[tuple[str, object], ...]:
-    """The steps of a dotted path: ("key", name), ("index", i) or, after a top-level ``objects`` when
-    ``globs``, ("glob", pattern). Raises ValueError saying what is malformed."""
-    steps: list[tuple[str, object]] = []
-    i, n = 0, len(text)
-    if not text:
-        raise ValueError("empty path")
-    while True:
-        m = _NAME.match(text, i)
-        if not m:
-            raise ValueError(f"expected a field name at character {i + 1}")
-        steps.append(("key", m.group()))
-        i = m.end()
-        while i < n and text[i] == "[":
-            depth, j = 0, i
-            while j < n:
-                depth += {"[": 1, "]": -1}.get(text[j], 0)
-                if depth == 0:
-                    break
-                j += 1
-            if j >= n:
-                raise ValueError(f"the '[' at character {i + 1} is not closed")
-            sel = text[i + 1:j]
-            if re.fullmatch(r"\d+", sel):
-                steps.append(("index", int(sel)))
-            elif globs and steps == [("key", "objects")] and sel:
-                steps.append(("glob", sel))
-            else:
-                where = "an object's name (a glob) or an index" if globs and steps == [("key", "objects")] else \
-                    "an index (only objects[...] takes a name)"
-                raise ValueError(f"[{sel}] at character {i + 1}: expected {where}")
-            i = j + 1
-        if i == n:
-            return tuple(steps)
-        if text[i] != ".":
-            raise ValueError(f"unexpected {text[i]!r} at character {i + 1}")
-        i += 1
-
-
-def path_text(path: tuple) -> str:
-    """A concrete path as the loader's messages write it: ``objects[10].emission.luminance``."""
-    out = ""
-    for step in path:
-        out += f"[{step}]" if isinstance(step, int) else (f".{step}" if out else step)
-    return out
-
-
-def lookup(data, steps) -> tuple[object, str | None]:
-    """(value, None) at ``steps`` (from :func:`parse_field` without globs) in ``data``, or (None, why)."""
-    node, done = data, ()
-    for kind, arg in steps:
-        here = path_text(done) or "the report"
-        if kind == "key":
-            if not isinstance(node, dict):
-                return None, f"{here} is not a block"
-            if arg not in node:
-                return None, f"{here} has no field {arg!r}"
-        else:
-            if not isinstance(node, list) or not 0 <= arg < len(node):
-                return None, f"{here} has no element [{arg}]"
-        node, done = node[arg], (*done, arg)
-    return node, None
-
-
-def numeric_leaves(value, prefix: str) -> dict[str, int | float]:
-    """Every number in ``value`` (nested blocks and lists) by its dotted key path; booleans, strings
-    and nulls are left out."""
-    out: dict[str, int | float] = {}
-    if isinstance(value, bool) or value is None:
-        return out
-    if isinstance(value, (int, float)):
-        out[prefix] = value
-    elif isinstance(value, dict):
-        for k, v in value.items():
-            out |= numeric_leaves(v, f"{prefix}.{k}" if prefix else k)
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            out |= numeric_leaves(v, f"{prefix}[{i}]")
-    return out
-
-
-def run_figures(report: dict) -> dict[str, int | float]:
-    """A run's figures (the columns of sweep.csv): every numeric leaf of the report's :data:`FIGURES`."""
-    out: dict[str, int | float] = {}
-    for key in FIGURES:
-        out |= numeric_leaves(report.get(key), key)
-    return out
-
-
-# -- fields and their grid ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SweepField:
-    """One ``--set FIELD=START:STOP:N`` (``given``): ``text`` the FIELD, ``steps`` its path, N values from
-    ``start`` to ``stop`` (geometric if ``log``). ``targets`` (after :meth:`resolve`): each concrete
-    path it sets, with the keys that setting it removes (an emission's other alternative);
-    ``integer``: every target holds an integer, so the values are written as integers."""
-
-    given: str
-    text: str
-    steps: tuple
-    start: float
-    stop: float
-    n: int
-    log: bool = False
-    targets: tuple[tuple[tuple, tuple[str, ...]], ...] = ()
-    integer: bool = False
-
-    @property
-    def argument(self) -> str:
-        return f"--set {self.given}"
-
-    @property
-    def values(self) -> list[int | float]:
-        """The N values, START first and STOP last."""
-        if self.n == 1:
-            v = [self.start]
-        elif self.log:
-            v = np.geomspace(self.start, self.stop, self.n)
-        else:
-            v = np.linspace(self.start, self.stop, self.n)
-        out: list[int | float] = [float(x) for x in v]
-        if self.integer:
-            out = [int(round(x)) if abs(x - round(x)) <= INTEGER_TOLERANCE * max(1.0, abs(x)) else x for x in out]
-        return out
-
-    def resolve(self, raw: dict) -> SweepField:
-        """This field with its targets in the scene ``raw`` (scene.json parsed); raises
-        :class:`SweepArgumentError` for a path the scene does not have."""
-        def bad(message):
-            raise SweepArgumentError(self.argument, message)
-
-        branches = [((), raw, None)]  # (path, node, the glob that chose the object)
-        for depth, (kind, arg) in enumerate(self.steps):
-            last = depth == len(self.steps) - 1
-            nxt = []
-            for path, node, glob in branches:
-                where = _describe(raw, path, glob)
-                if kind == "key":
-                    if node is MISSING:
-                        nxt.append(((*path, arg), MISSING, glob))
-                    elif not isinstance(node, dict):
-                        bad(f"{where} is {_what(node)}: it has no field {arg!r}")
-                    elif arg in node:
-                        nxt.append(((*path, arg), node[arg], glob))
-                    elif last or _may_create((*path, arg)):
-                        nxt.append(((*path, arg), MISSING, glob))
-                    else:
-                        fields = ", ".join(sorted(node)) or "none"
-                        hint = f"; narrow the glob {glob!r}" if glob else ""
-                        bad(f"{where} has no field {arg!r} (its fields: {fields}){hint}")
-                elif kind == "index":
-                    if not isinstance(node, list):
-                        bad(f"{where} is {_what(node)}, not a list: [{arg}] addresses nothing")
-                    if arg >= len(node):
-                        bad(f"{where} has {len(node)} entries: [{arg}] is out of range")
-                    nxt.append(((*path, arg), node[arg], glob))
-                else:
-                    if not isinstance(node, list):
-                        bad(f"{where} is {_what(node)}, not a list of objects")
-                    hits = [i for i, o in enumerate(node)
-                            if isinstance(o, dict) and isinstance(o.get("name"), str) and fnmatchcase(o["name"], arg)]
-                    if not hits:
-                        names = [o.get("name") for o in node if isinstance(o, dict) and isinstance(o.get("name"), str)]
-                        listed = ", ".join(names[:12]) + (f" and {len(names) - 12} more" if len(names) > 12 else "")
-                        literal = [i for i, o in enumerate(node) if isinstance(o, dict) and o.get("name") == arg]
-                        hint = (f"; names are globs (*, ? and [...] match), so address it by its index, "
-                                f"objects[{literal[0]}]" if literal else "")
-                        bad(f"no object's name matches {arg!r} (objects: {listed or 'none'}){hint}")
-                    nxt += [((*path, i), node[i], arg) for i in hits]
-            branches = nxt
-        targets, integer = [], True
-        for path, value, glob in branches:
-            where = _describe(raw, path, glob)
-            if isinstance(value, dict):
-                bad(f"{where} is a block, not a value: name one of its fields ({', '.join(sorted(value)) or 'none'})")
-            if isinstance(value, list):
-                bad(f"{where} is a list of {len(value)} values: name one of them, as {path_text(path)}[0]")
-            if isinstance(value, bool):
-                bad(f"{where} is {json.dumps(value)}: only numbers can be swept")
-            integer &= isinstance(value, int)
-            targets.append((path, _replaced_alternatives(raw, path)))
-        return replace(self, targets=tuple(targets), integer=integer)
-
-
-def _may_create(path: tuple) -> bool:
-    """A block that may be missing: ``methods`` and a method's options (their defaults apply)."""
-    return path == ("methods",) or (len(path) == 2 and path[0] == "methods")
-
-
-def _what(node) -> str:
-    if isinstance(node, dict):
-        return "a block"
-    if isinstance(node, list):
-        return f"a list of {len(node)}"
-    return json.dumps(node)[:40]
-
-
-def _describe(raw: dict, path: tuple, glob: str | None) -> str:
-    """A path for a message, with the name of the object it goes through."""
-    text = path_text(path) or "scene.json"
-    if len(path) >= 2 and path[0] == "objects" and isinstance(path[1], int):
-        name = raw["objects"][path[1]].get("name")
-        if isinstance(name, str):
-            text += f" (object {name!r}{f', matched by {glob!r}' if glob else ''})"
-    return text
-
-
-def _replaced_alternatives(raw: dict, path: tuple) -> tuple[str, ...]:
-    """The keys that setting ``path`` removes from its block: the other alternatives of an emission
-    (luminance or flux), in an ``emission`` block or a legacy ``emitter`` material."""
-    if len(path) != 4 or path[0] != "objects" or path[2] not in ("emission", "material"):
-        return ()
-    block = raw["objects"][path[1]].get(path[2])
-    if path[2] == "material" and not (isinstance(block, dict) and block.get("type") == "emitter"):
-        return ()
-    key = path[3]
-    if not any(key in alt for alt in EMISSION.alternatives):
-        return ()
-    return tuple(k for alt in EMISSION.alternatives if key not in alt for k in alt)
-
-
-def parse_set(text: str) -> SweepField:
-    """``FIELD=START:STOP:N`` as a :class:`SweepField` (not yet resolved in a scene). Raises
-    :class:`SweepArgumentError`."""
-    argument = f"--set {text}"
-    name, eq, spec = text.rpartition("=")
-    if not eq:
-        raise SweepArgumentError(argument, "expected FIELD=START:STOP:N")
-    try:
-        steps = parse_field(name)
-    except ValueError as e:
-        raise SweepArgumentError(argument, f"field {name!r}: {e}") from None
-    parts = spec.split(":")
-    if len(parts) != 3:
-        raise SweepArgumentError(argument, f"expected START:STOP:N after '=', got {spec!r}")
-    try:
-        start, stop = float(parts[0]), float(parts[1])
-    except ValueError:
-        raise SweepArgumentError(argument, f"START and STOP must be numbers, got {parts[0]!r} and {parts[1]!r}") \
-            from None
-    if not (math.isfinite(start) and math.isfinite(stop)):
-        raise SweepArgumentError(argument, "START and STOP must be finite")
-    if not re.fullmatch(r"\s*[+-]?\d+\s*", parts[2]):
-        raise SweepArgumentError(argument, f"N must be a whole number of values, got {parts[2]!r}")
-    n = int(parts[2])
-    if n < 1:
-        raise SweepArgumentError(argument, f"N must be >= 1 (the number of values), got {n}")
-    if n == 1 and start != stop:
-        raise SweepArgumentError(argument, f"N = 1 gives one value: START and STOP must be equal, got {start:g} "
-                                           f"and {stop:g}")
-    if n > MAX_RUNS:
-        raise SweepArgumentError(argument, f"{n} values, more than the {MAX_RUNS} runs a sweep may have")
-    return SweepField(text, name, steps, start, stop, n)
-
-
-# -- requirements -------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Requirement:
-    """``KEY OP VALUE``: the figure at ``key`` (a dotted path into a run's report) compared with ``value``."""
-
-    text: str
-    key: str
-    steps: tuple
-    op: str
-    value: float
-
-    def judge(self, report: dict) -> dict:
-        """{"requirement", "value" (the figure, or None), "met", and "why" where it is not met}."""
-        v, why = lookup(report, self.steps)
-        if why is None and (isinstance(v, bool) or not isinstance(v, (int, float))):
-            why = f"{self.key} is {json.dumps(v)[:40]}, not a number"
-        if why is not None:
-            return {"requirement": self.text, "value": None, "met": False, "why": why}
-        met = bool(OPS[self.op](v, self.value))
-        out = {"requirement": self.text, "value": v, "met": met}
-        if not met:
-            out["why"] = f"{self.key} is {v:.6g}"
-        return out
-
-
-def check_report_key(argument: str, steps) -> None:
-    """A report key's first name must be a section of every report (tracer.products.report.REPORT_SECTIONS), so
-    that a mistyped key is refused before the runs rather than found missing in each. (What lies below
-    a section depends on the scene and the method: a run whose report lacks it fails the requirement.)
-    Raises :class:`SweepArgumentError`."""
-    name = steps[0][1]
-    if name not in REPORT_SECTIONS:
-        near = difflib.get_close_matches(name, REPORT_SECTIONS, n=1)
-        hint = f"did you mean {near[0]!r}? " if near else ""
-        raise SweepArgumentError(argument, f"{name!r} is not a section of a run's report.json ({hint}the sections "
-                                           f"are: {', '.join(REPORT_SECTIONS)})")
-
-
-_REQUIREMENT = re.compile(r"\s*(?P<key>[^\s<>=!]+)\s*(?P<op>>=|<=|==|=|!=|>|<)\s*(?P<value>[^\s<>=!]\S*)\s*")
-
-
-def parse_requirement(text: str) -> Requirement:
-    """``"KEY OP VALUE"`` (spaces optional) as a :class:`Requirement`. Raises :class:`SweepArgumentError`."""
-    argument = f"--require {text}"
-    m = _REQUIREMENT.fullmatch(text)
-    if not m:
-        raise SweepArgumentError(argument, "expected \"KEY OP VALUE\", KEY a dotted path into the report "
-                                           "(hud.contrast_ratio), OP one of >= <= > <, VALUE a number")
-    key, op, value = m["key"], m["op"], m["value"]
-    if op not in OPS:
-        raise SweepArgumentError(argument, f"OP {op!r}: must be one of {' '.join(OPS)}")
-    try:
-        steps = parse_field(key, globs=False)
-    except ValueError as e:
-        raise SweepArgumentError(argument, f"KEY {key!r}: {e}") from None
-    check_report_key(argument, steps)
-    try:
-        v = float(value)
-    except ValueError:
-        raise SweepArgumentError(argument, f"VALUE must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise SweepArgumentError(argument, f"VALUE must be finite, got {value!r}")
-    return Requirement(f"{key} {op} {value}", key, steps, op, v)
 
 
 # -- the plan: fields resolved, every grid point validated ----------------------------------------------
@@ -939,146 +592,6 @@ def read_csv(path) -> list[dict]:
     return [dict(zip(head, map(number, row), strict=True)) for row in rows[1:]]
 
 
-# -- sweep.png ----------------------------------------------------------------------------------------
-#: The chart's plot box per panel, px per font pixel (x 2 at the default scale: 560 x 180 px; wider where the
-#: caption is).
-PLOT_W, PLOT_H = 280, 90
-#: Requirement thresholds (dashed), the recommended range and the grid lines.
-THRESHOLD, SHADE, GRID_LINE = (230, 0, 0), (214, 238, 214), (226, 226, 226)
-#: Colour map positions of the series (one per combination of the other fields' values).
-SERIES_T = (0.0, 0.8)
-
-
-@dataclass
-class Axis:
-    """A chart axis from ``lo`` to ``hi`` (data units; log10-spaced if ``log``) with ``ticks``."""
-
-    lo: float
-    hi: float
-    log: bool
-    ticks: list[float]
-
-    def frac(self, v: float) -> float:
-        u = (lambda t: math.log10(t)) if self.log else (lambda t: t)
-        return (u(v) - u(self.lo)) / (u(self.hi) - u(self.lo))
-
-
-def _nice_step(span: float, target: int = 5) -> float:
-    raw = span / target
-    e = math.floor(math.log10(raw))
-    f = raw / 10.0**e
-    return (1 if f < 1.5 else 2 if f < 3.5 else 5 if f < 7.5 else 10) * 10.0**e
-
-
-def _linear_ticks(lo: float, hi: float, step: float | None = None) -> list[float]:
-    """Multiples of ``step`` (default: a 1-2-5 step of about a fifth of the span) within [lo, hi]."""
-    step = step or _nice_step(hi - lo)
-    first = math.ceil(lo / step - 1e-9)
-    return [float(f"{k * step:.12g}") for k in range(first, math.floor(hi / step + 1e-9) + 1)]
-
-
-def _log_ticks(lo: float, hi: float) -> list[float]:
-    """Decades within [lo, hi]; with fewer than 3, also 2 and 5 times them, then every integer multiple."""
-    e0, e1 = math.floor(math.log10(lo)), math.ceil(math.log10(hi))
-    for mantissas in ((1,), (1, 2, 5), tuple(range(1, 10))):
-        ticks = [m * 10.0**e for e in range(e0, e1 + 1) for m in mantissas if lo * (1 - 1e-9) <= m * 10.0**e <=
-                 hi * (1 + 1e-9)]
-        if len(ticks) >= 3:
-            break
-    if len(ticks) > 10:
-        k = math.ceil(len(ticks) / 8)
-        ticks = ticks[::k]
-    return ticks if len(ticks) >= 2 else _linear_ticks(lo, hi)
-
-
-def _is_log(values: list[float]) -> bool:
-    """Log axis where the values are positive and span more than a decade."""
-    return bool(values) and min(values) > 0 and max(values) > 10 * min(values)
-
-
-def x_axis(values: list[float], geometric: bool = False) -> Axis:
-    """The x axis: the values' span padded by 4 % on each side; in log10 where they span more than a
-    decade or are ``geometric`` (a --log field: evenly spaced in log, and interpolated in log)."""
-    log = _is_log(values) or (geometric and min(values) > 0 and max(values) > min(values))
-    lo, hi = min(values), max(values)
-    if log:
-        a, b = math.log10(lo), math.log10(hi)
-        pad = 0.04 * (b - a)
-        lo, hi = 10.0 ** (a - pad), 10.0 ** (b + pad)
-        return Axis(lo, hi, True, _log_ticks(lo, hi))
-    if hi == lo:
-        d = 0.1 * abs(lo) or 1.0
-        lo, hi = lo - d, hi + d
-    pad = 0.04 * (hi - lo)
-    lo, hi = lo - pad, hi + pad
-    return Axis(lo, hi, False, _linear_ticks(lo, hi))
-
-
-def y_axis(values: list[float]) -> Axis:
-    """A panel's y axis over ``values`` (the runs' figures and the thresholds): whole decades for a log
-    axis, whole tick steps for a linear one."""
-    if not values:
-        return Axis(0.0, 1.0, False, [0.0, 0.5, 1.0])
-    lo, hi = min(values), max(values)
-    if _is_log(values):
-        lo, hi = 10.0 ** math.floor(math.log10(lo)), 10.0 ** math.ceil(math.log10(hi))
-        return Axis(lo, hi, True, _log_ticks(lo, hi))
-    if hi == lo:
-        d = 0.1 * abs(lo) or 1.0
-        lo, hi = lo - d, hi + d
-    step = _nice_step(hi - lo)
-    lo, hi = math.floor(lo / step + 1e-9) * step, math.ceil(hi / step - 1e-9) * step
-    return Axis(lo, hi, False, _linear_ticks(lo, hi, step))
-
-
-def tick_label(v: float) -> str:
-    """A tick's label: 0, or :func:`tracer.products.falsecolour.value_label` with its sign."""
-    if v == 0:
-        return "0"
-    return ("-" if v < 0 else "") + value_label(abs(v))
-
-
-def _fit(text: str, chars: int = 120) -> str:
-    """``text`` cut to ``chars`` characters, with "..." where it was cut."""
-    return text if len(text) <= chars else text[:chars - 3] + "..."
-
-
-def _drawable(text: str) -> str:
-    """``text`` in the bitmap font's characters ("?" for any other)."""
-    return "".join(c if c in FONT else "?" for c in text)
-
-
-def _polyline(canvas, rows, cols, colour, width, clip):
-    """The line through the pixels (``rows``, ``cols``) in order, ``width`` px thick, within ``clip``
-    (top, left, bottom, right; ends exclusive)."""
-    rs, cs = [], []
-    for r0, c0, r1, c1 in zip(rows[:-1], cols[:-1], rows[1:], cols[1:], strict=True):
-        n = max(abs(r1 - r0), abs(c1 - c0)) + 1
-        rs.append(np.rint(np.linspace(r0, r1, n)).astype(int))
-        cs.append(np.rint(np.linspace(c0, c1, n)).astype(int))
-    if not rs:
-        return
-    rows, cols = np.concatenate(rs), np.concatenate(cs)
-    h = width // 2
-    top, left, bottom, right = clip
-    for dr in range(-h, width - h):
-        for dc in range(-h, width - h):
-            r, c = rows + dr, cols + dc
-            keep = (r >= top) & (r < bottom) & (c >= left) & (c < right)
-            canvas[r[keep], c[keep]] = colour
-
-
-def _marker(canvas, r, c, half, colour, filled, ring):
-    block = canvas[r - half:r + half + 1, c - half:c + half + 1]
-    if filled:
-        block[:] = colour
-    else:
-        block[:ring] = colour
-        block[-ring:] = colour
-        block[:, :ring] = colour
-        block[:, -ring:] = colour
-
-
 def _series(result: SweepResult) -> list[tuple[str, list[Run]]]:
     """(label, runs in order of x) for each combination of the fields other than x."""
     plan = result.plan
@@ -1094,157 +607,53 @@ def _series(result: SweepResult) -> list[tuple[str, list[Run]]]:
     return out
 
 
-def sweep_chart(result: SweepResult, scale: int = 2) -> tuple[np.ndarray, dict]:
-    """The sweep's chart: (rgb (H, W, 3) uint8 sRGB, geometry).
-
-    One panel per key of ``plan.y_keys``: the runs' figure against the x field (``plan.x``), a line and
-    a marker per run (filled where the run meets every requirement, hollow where it does not), one
-    line per combination of the other fields' values (in colours of the colour map, with a legend);
-    log axes where the values span more than a decade; each requirement on the panel's key as a
-    dashed red line at its threshold; the one-field recommendation's intervals shaded green. A
-    caption says what was swept and the recommendation. ``scale``: font pixels per glyph pixel.
-
-    The geometry: {"width", "height", "panels": [{"key", "box" (top, left, height, width of the plot
-    box), "x" and "y" ({"lo", "hi", "log", "ticks": [{"value", "px"}]}: columns for x, rows for y),
-    "thresholds" [{"requirement", "value", "row"}], "shaded" [[first, last column]], "points" [{"run",
-    "row", "column", "meets"}]}]}; a pixel's row r shows the value at fraction (bottom - r) / (height - 1)
-    of the axis from its bottom row, ``bottom`` = top + height - 1."""
-    s = scale
+def sweep_chart(result: SweepResult) -> tuple[np.ndarray, dict]:
+    """sweep.png (:func:`tracer.products.charts.sweep_chart`): one panel per key of ``plan.y_keys`` (at
+    most :data:`MAX_PANELS`), the runs' figure against the x field (``plan.x``), one line per
+    combination of the other fields' values, drawn between runs as the recommendation interpolates
+    (linear in the parameter, in its log for a --log field, so that a line crosses a threshold at the
+    interval's edge); log axes where the values span more than a decade (and for a --log field); each
+    requirement on the panel's key a dashed red line, the one-field recommendation's intervals shaded,
+    the runs that meet every requirement filled. Returns (rgb, geometry) with the sweep's own keys
+    ("x_field", "series") added to the geometry."""
     plan = result.plan
-    text_h = text_size("0", s)[0]
-    up_ = (GLYPH_H * s) // 2
-    margin, tick, lw = 3 * s, 2 * s, 2 * (s // 2) + 1
-    ph = PLOT_H * s
     xi = plan.fields.index(plan.x)
-    xa = x_axis([float(v) for v in plan.x.values], plan.x.log)
-    series = _series(result)
-    positions = np.linspace(*SERIES_T, len(series)) if len(series) > 1 else [0.25] * len(series)
-    colours = [tuple(int(c) for c in colour_map(t)) for t in positions]
-    keys = plan.y_keys[:MAX_PANELS]
     rec = result.recommendation()
+    shaded = [[iv["from"], iv["to"]] for iv in rec.get("intervals", [])] if plan.requirements else []
     panels = []
-    for key in keys:
+    for key in plan.y_keys[:MAX_PANELS]:
         steps = parse_field(key, globs=False)
-        vals = {}
+        points = {}
         for r in result.runs:
             v, why = lookup(r.report, steps)
             if why is None and not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v):
-                vals[r.index] = float(v)
-        thresholds = [q for q in plan.requirements if q.key == key]
-        ya = y_axis(list(vals.values()) + [q.value for q in thresholds])
-        panels.append((key, vals, thresholds, ya))
-    labels_w = max((text_size(tick_label(t), s)[1] for *_, ya in panels for t in ya.ticks), default=0)
-    left = margin + labels_w + s + tick
-    caption = [_drawable(f"{plan.scene_name}: sweep of {len(plan.grid)} runs, {result.method}, "
-                         + (f"{result.budget['rays']:,} rays" if result.budget["rays"] else
-                            f"{result.budget['seconds']:g} s") + f" per run, seed {result.seed}"
-                         + (f", stopped after {len(result.runs)}" if result.partial else "")),
-               _drawable(_fit(result.describe()))]
-    x_title = _drawable(plan.x.text + (" (log scale)" if xa.log else ""))
-    legend = [_drawable(_fit(label)) for label, _ in series] if len(series) > 1 else []
-    title_h = text_h + up_ + 2 * s  # the key's title, clear of the top tick's label
-    block_h = title_h + ph + tick + s
-    top0 = margin + len(caption) * (text_h + s) + margin
-    bottom_h = text_h + s + text_h + 2 * s + len(legend) * (text_h + s) + margin
-    height = top0 + len(panels) * (block_h + margin) + bottom_h
-    texts = [*caption, *legend, x_title]
-    width = max(left + PLOT_W * s + 8 * s, *(margin + text_size(t, s)[1] + margin for t in texts))
-    pw = width - left - 8 * s  # at least PLOT_W * s: as wide as the caption allows
-    canvas = np.empty((height, width, 3), np.uint8)
-    canvas[:] = PAPER
-    for i, line in enumerate(caption):
-        draw_text(canvas, line, margin, margin + i * (text_h + s) + up_, s)
-
-    def col(v):
-        return left + int(round(xa.frac(v) * (pw - 1)))
-
-    geometry: dict = {"panels": []}
-    for p, (key, vals, thresholds, ya) in enumerate(panels):
-        top = top0 + p * (block_h + margin) + title_h
-        bottom = top + ph - 1
-
-        def row(v, ya=ya, bottom=bottom):
-            return bottom - int(round(ya.frac(v) * (ph - 1)))
-
-        clip = (top, left, top + ph, left + pw)
-        draw_text(canvas, _drawable(key), left, top - title_h + up_ + s, s)
-        shaded = []
-        for iv in rec.get("intervals", []) if plan.requirements else []:
-            c0, c1 = sorted((col(iv["from"]), col(iv["to"])))
-            c0, c1 = max(c0, left), min(c1, left + pw - 1)
-            canvas[top:top + ph, c0:c1 + 1] = SHADE
-            shaded.append([c0, c1])
-        x_ticks = [{"value": t, "px": col(t)} for t in xa.ticks]
-        y_ticks = [{"value": t, "px": row(t)} for t in ya.ticks]
-        for t in x_ticks:
-            canvas[top:top + ph, t["px"]] = GRID_LINE
-            canvas[top + ph:top + ph + tick, t["px"] - s // 2:t["px"] + (s + 1) // 2] = INK
-        for t in y_ticks:
-            canvas[t["px"], left:left + pw] = GRID_LINE
-            canvas[t["px"] - s // 2:t["px"] + (s + 1) // 2, left - tick:left] = INK
-        last_top = None
-        for t in reversed(y_ticks):  # from the top down; a label that would overlap the one above is left out
-            label_top = t["px"] - up_
-            if last_top is None or label_top >= last_top + text_h:
-                draw_text(canvas, tick_label(t["value"]), left - tick - s, t["px"], s, anchor="right")
-                last_top = label_top
-        canvas[top - 1, left - 1:left + pw + 1] = INK  # the plot box's frame, just outside it
-        canvas[top + ph, left - 1:left + pw + 1] = INK
-        canvas[top - 1:top + ph + 1, left - 1] = INK
-        canvas[top - 1:top + ph + 1, left + pw] = INK
-        drawn = []
-        dash = 4 * s
-        cols = np.arange(left, left + pw)
-        on = cols[((cols - left) // dash) % 3 != 2]
-        for q in thresholds:
-            r = row(q.value)
-            for dr in range(-(lw // 2), lw - lw // 2):
-                if top <= r + dr < top + ph:
-                    canvas[r + dr, on] = THRESHOLD
-            label = _drawable(f"{q.op} {q.value:g}")
-            draw_text(canvas, label, left + pw - s - text_size(label, s)[1], r - up_ - 2 * s if r - text_h > top
-                      else r + up_ + 2 * s, s, colour=THRESHOLD)
-            drawn.append({"requirement": q.text, "value": q.value, "row": r})
-        points = []
-        for (_, runs), colour in zip(series, colours, strict=True):
-            for a, b in zip(runs[:-1], runs[1:], strict=True):
-                if a.index not in vals or b.index not in vals:
-                    continue  # a run without the figure breaks the line
-                # Between two runs the figure is drawn as the recommendation interpolates it: linear in
-                # the parameter (in its log for a --log field), so that it crosses a threshold at the edge.
-                t = np.linspace(0.0, 1.0, pw // 4 + 2)
-                xa_, xb_ = a.values[xi], b.values[xi]
-                x = np.exp(np.log(xa_) + t * np.log(xb_ / xa_)) if plan.x.log else xa_ + t * (xb_ - xa_)
-                y = vals[a.index] + t * (vals[b.index] - vals[a.index])
-                _polyline(canvas, [row(v) for v in y], [col(v) for v in x], colour, lw, clip)
-            for r in runs:
-                if r.index in vals:
-                    rr, cc = row(vals[r.index]), col(r.values[xi])
-                    met = result.meets(r)
-                    _marker(canvas, rr, cc, 3 * s, colour, met, s)
-                    points.append({"run": r.index, "row": rr, "column": cc, "meets": met})
-        if not vals:
-            draw_text(canvas, "no run has this figure", left + pw // 2, top + ph // 2, s, anchor="centre")
-        last_right = None
-        for t in x_ticks if p == len(panels) - 1 else []:
-            label = tick_label(t["value"])
-            w = text_size(label, s)[1]
-            if last_right is None or t["px"] - w // 2 > last_right + 2 * s:
-                draw_text(canvas, label, t["px"], top + ph + tick + s + up_, s, anchor="centre")
-                last_right = t["px"] - w // 2 + w
-        geometry["panels"].append({"key": key, "box": [top, left, ph, pw],
-                                   "x": {"lo": xa.lo, "hi": xa.hi, "log": xa.log, "ticks": x_ticks},
-                                   "y": {"lo": ya.lo, "hi": ya.hi, "log": ya.log, "ticks": y_ticks},
-                                   "thresholds": drawn, "shaded": shaded, "points": points})
-    y0 = top0 + len(panels) * (block_h + margin) + text_h + s
-    draw_text(canvas, x_title, left + pw // 2, y0 + up_, s, anchor="centre")
-    for i, (label, colour) in enumerate(zip(legend, colours, strict=False)):
-        r = y0 + text_h + 2 * s + i * (text_h + s) + up_
-        canvas[r - s:r + s, left:left + 6 * s] = colour
-        draw_text(canvas, label, left + 8 * s, r, s)
-    geometry |= {"width": width, "height": height, "x_field": plan.x.text,
-                 "series": [label for label, _ in series]}
-    return canvas, geometry
+                points[r.index] = float(v)
+        panels.append({"key": key, "unit": report_unit(key), "points": points, "shaded": shaded,
+                       "thresholds": [{"requirement": q.text, "value": q.value}
+                                      for q in plan.requirements if q.key == key]})
+    series = []
+    for label, runs in _series(result):
+        curves = {}
+        for a, b in zip(runs[:-1], runs[1:], strict=True):
+            for panel in panels:
+                pts = panel["points"]
+                if a.index in pts and b.index in pts:  # a run without the figure breaks the line
+                    t = np.linspace(0.0, 1.0, 64)
+                    xa, xb = a.values[xi], b.values[xi]
+                    xs = np.exp(np.log(xa) + t * np.log(xb / xa)) if plan.x.log else xa + t * (xb - xa)
+                    curves.setdefault(panel["key"], {})[a.index] = (xs, pts[a.index] + t * (pts[b.index]
+                                                                                         - pts[a.index]))
+        series.append({"label": label, "runs": [r.index for r in runs], "meets": {r.index: result.meets(r)
+                                                                               for r in runs}, "curves": curves})
+    xs = {r.index: float(r.values[xi]) for r in result.runs}
+    x = {"field": plan.x.text, "unit": field_unit(plan.x.steps), "values": xs,
+         "log": plan.x.log or charts.is_log(list(xs.values()) or [1.0])}
+    budget = f"{result.budget['rays']:,} rays" if result.budget["rays"] else f"{result.budget['seconds']:g} s"
+    caption = [f"{plan.scene_name}: sweep of {len(plan.grid)} runs, {result.method}, {budget} per run, seed "
+               f"{result.seed}" + (f", stopped after {len(result.runs)}" if result.partial else ""),
+               result.describe()]
+    rgb, geometry = charts.sweep_chart(panels, x, series, caption)
+    return rgb, geometry | {"x_field": plan.x.text, "series": [s["label"] for s in series]}
 
 
 # -- the output set -----------------------------------------------------------------------------------
