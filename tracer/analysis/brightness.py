@@ -17,7 +17,7 @@ import numpy as np
 from ..core.units import luminance
 from ..transport.chains import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
 from ..transport.world import World
-from .sections import find_sections
+from .sections import Sections, find_sections
 
 
 def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
@@ -115,7 +115,8 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
     return out
 
 
-def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True) -> dict:
+def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True,
+                       sections: Sections | None = None) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.transport.chains`.
 
     The sections are :mod:`tracer.analysis.sections`' ("symbol" and "background" where the dominant
@@ -163,7 +164,7 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         out["paths"].append({"path": "other paths", "predicted_mean_cd_m2": float(sum(y.mean() for y in per_path[8:]))})
     if not res["paths"]:
         return out
-    sections = find_sections(res)
+    sections = find_sections(world, None if environment else res) if sections is None else sections
     lcd_paths, grid_lcd = sections.lcd_paths, sections.lcd
     if not lcd_paths:
         out["image_path"] = res["paths"][0]["path"]

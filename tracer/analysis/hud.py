@@ -50,7 +50,6 @@ import math
 
 import numpy as np
 
-from ..transport.chains import specular_paths
 from .sections import Sections, erode, find_sections
 
 #: Window of the spot's smoothing, as a share of the display's width in pixels.
@@ -129,18 +128,13 @@ def _threshold_masks(y: np.ndarray, mask: np.ndarray, out: dict) -> tuple[np.nda
     return (sym_in if sym_in.any() else sym), (bg_in if bg_in.any() else bg)
 
 
-def hud_sections(world) -> Sections:
-    """The sections of the HUD's own light (the environment left out: the display is what the HUD's
-    chains reach, whatever lies behind it)."""
-    return find_sections(specular_paths(world, environment=False))
-
-
 def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None,
                 sections: Sections | None = None) -> dict | None:
     """The figures of the module docstring for an image ``y`` (H, W) cd/m^2 of ``world``'s eye (with
     ``environment``, ``y`` is the HUD channel alone and ``environment`` the environment channel's image);
-    None where the eye sees no display. ``sections`` (:func:`hud_sections`) may be given when known."""
-    sections = hud_sections(world) if sections is None else sections
+    None where the eye sees no display. ``sections`` (:func:`tracer.analysis.sections.find_sections`) may
+    be given when known."""
+    sections = find_sections(world) if sections is None else sections
     if sections.display is None:
         return None
     mask = sections.pixels(sections.display, y.shape, fill=True)

@@ -4,9 +4,11 @@ for every figure that speaks of symbols or background, the HUD figures (:mod:`.h
 brightness-theorem comparison (:mod:`.brightness`) alike.
 
 - Where the dominant chain crosses an LCD (a direct HUD: the eye sees the LCD through the mirror and
-  the windshield), "symbol" is the pixels whose chain crosses a clear cell, eroded by one grid cell so
-  that stroke edges blurred by the pupil are left out: the stroke interiors a luminance meter aimed at a
-  stroke reads, the ghost included where it overlaps them. "background" is the pixels whose chain and
+  the windshield), "symbol" is the pixels whose chain crosses a clear cell, as do the chains of their
+  four neighbouring pixels (an erosion by one pixel, whatever the grid's stride: strokes two pixels
+  wide keep their middle), so that stroke edges blurred by the pupil and the pixel are left out: the
+  stroke interiors a luminance meter aimed at a stroke reads, the ghost included where it overlaps
+  them. "background" is the pixels whose chain and
   next chain through the LCD (the windshield's ghost) both cross black cells, so that the ghost's
   symbols do not count as black leak, at least BACKGROUND_MARGIN_PX pixels from any other: the black
   level away from the halo that the pupil spreads around every stroke.
@@ -22,6 +24,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..transport.chains import specular_paths
 
 #: The background's distance from the symbols' edges (and the display's), pixels: the pupil's blur of a
 #: stroke, a pixel or two on the presets, is left out of the black level.
@@ -83,8 +87,41 @@ def _on_grid(chains: dict, path: dict) -> np.ndarray:
     return values.reshape(chains["grid"])
 
 
-def find_sections(chains: dict) -> Sections:
-    """The sections of a :func:`~tracer.transport.chains.specular_paths` result on its grid."""
+def _interior(world, chains: dict, main: dict, clear: np.ndarray) -> np.ndarray:
+    """The grid cells of ``clear`` (gh, gw) whose pixel's four neighbouring pixels' chief rays also reach
+    a clear cell along the chain ``main`` (by its path name): an erosion by one pixel. With a stride of
+    one pixel that is the grid's own erosion; else the neighbours' chief rays are followed."""
+    s = chains["stride"]
+    if s == 1:
+        return erode(clear)
+    eye = world.eye
+    w, h = eye.width, eye.height
+    cells = np.flatnonzero(clear)
+    centre = chains["pixels"][cells]
+    y, x = centre // w, centre % w
+    ok = np.ones(len(cells), bool)
+    neighbours = []
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        ny, nx = y + dy, x + dx
+        inside = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
+        ok &= inside
+        neighbours.append(np.where(inside, ny * w + nx, 0))
+    around = specular_paths(world, pixels=np.concatenate(neighbours), environment=False)
+    value = np.full(4 * len(cells), np.nan)
+    for p in around["paths"]:
+        if p["path"] == main["path"]:
+            value[p["pixel"]] = p["lcd"]
+    ok &= np.all((value >= 0.5).reshape(4, len(cells)), axis=0)
+    out = np.zeros(clear.size, bool)
+    out[cells[ok]] = True
+    return out.reshape(clear.shape)
+
+
+def find_sections(world, chains: dict | None = None) -> Sections:
+    """The sections of the HUD's own light (the environment left out: the display is what the HUD's
+    chains reach, whatever lies behind it) on the grid of
+    :func:`~tracer.transport.chains.specular_paths`; ``chains``, that call's result where known."""
+    chains = specular_paths(world, environment=False) if chains is None else chains
     paths = chains["paths"]
     gh, gw = chains["grid"]
     if not paths:
@@ -104,5 +141,5 @@ def find_sections(chains: dict) -> Sections:
         background &= ~(_on_grid(chains, ghost) >= 0.5)
     for _ in range(math.ceil(BACKGROUND_MARGIN_PX / chains["stride"])):
         background = erode(background)
-    masks = {"symbol": erode(lcd >= 0.5), "background": background}
+    masks = {"symbol": _interior(world, chains, main, lcd >= 0.5), "background": background}
     return Sections(chains, masks, display, lcd, lcd_paths)

@@ -23,6 +23,7 @@ import numpy as np
 from ..analysis.aims import aim_preflight
 from ..analysis.brightness import brightness_theorem
 from ..analysis.hud import hud_figures
+from ..analysis.sections import find_sections
 from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from ..core.imageio import read_exr_channels, read_image, write_exr, write_png
 from ..core.units import luminance
@@ -179,10 +180,11 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     analysis = figures = None
     if analyse and world.accel is not None and not result.partial:
         t0 = time.perf_counter()
-        analysis = brightness_theorem(world, y, var_y, integrator.renders_environment)
+        sections = find_sections(world)
+        analysis = brightness_theorem(world, y, var_y, integrator.renders_environment, sections)
         analysis["seconds"] = time.perf_counter() - t0
-        figures = hud_figures(world, channels_y["hud"], channels_y.get("environment")) if "hud" in channels_y \
-            else hud_figures(world, y)
+        figures = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
+            if "hud" in channels_y else hud_figures(world, y, sections=sections)
     report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
     report["polarisation"] = world.polarisation_report()
     report["hud"] = figures
