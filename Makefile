@@ -2,26 +2,36 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+# The tracer and its charts (requirements.lock); the tests add pytest, bpy and Dask (requirements-test.lock).
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: venv demo test clean
+.PHONY: venv demo test test-quick clean
 
 venv: $(STAMP)
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements.lock
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-# Render the default preset (backward method with next-event estimation, 60 s) into out/ and print its report.
+$(TEST_STAMP): $(STAMP) requirements-test.lock
+	$(PY) -m pip install --quiet -r requirements-test.lock
+	touch $(TEST_STAMP)
+
+# Render the default preset (backward method with next-event estimation, 60 s) into out/hud-direct and
+# print its readouts.
 demo: $(STAMP)
 	$(VENV)/bin/hud-trace render hud-direct --method backward --seconds 60 --seed 1 --out out/hud-direct
-	cat out/hud-direct/report.json
+	$(VENV)/bin/hud-trace readouts out/hud-direct
 
-test: $(STAMP)
+test: $(TEST_STAMP)
 	$(PY) -m pytest -q
+
+# The tests not marked slow: at most 3 minutes on 2 cores, for everyday work.
+test-quick: $(TEST_STAMP)
+	$(PY) -m pytest -q -m "not slow"
 
 clean:
 	rm -rf $(VENV) out
@@ -33,7 +43,7 @@ clean:
 BLENDER_EXT = $(VENV)/lib/python3.11/site-packages/bpy/4.5/scripts/addons_core/bl_pkg/cli/blender_ext.py
 
 .PHONY: extension
-extension: $(STAMP)
+extension: $(TEST_STAMP)
 	$(PY) tools/build_extension.py --blender-ext $(BLENDER_EXT) --output-dir dist
 
 # The add-on tests (tests/test_blender_addon.py) on the oldest bpy the manifest allows (blender_version_min
@@ -65,7 +75,7 @@ test-bpy-oldest: $(STAMP42)
 LLVM19 = ls /usr/lib/*/libLLVM.so.19* 2>/dev/null | head -n 1
 
 .PHONY: bench
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(PY) -m pip install --quiet -r requirements-bench.lock
 	$(PY) benchmarks/convergence.py
 	@test -n "$$($(LLVM19))" || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && \

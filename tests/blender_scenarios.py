@@ -808,7 +808,7 @@ def scenario_readouts(out):
     bpy.ops.render.render(write_still=True)
     pkg = f"{module}.hud_addon"
     engine_mod, ui_mod = sys.modules[f"{pkg}.engine"], sys.modules[f"{pkg}.ui"]
-    rows = sys.modules[f"{module}.tracer.analysis.hud"].readouts(engine_mod.REPORTS[scene.name])
+    rows = sys.modules[f"{module}.tracer.products.report"].readouts(engine_mod.REPORTS[scene.name])
     labels = []
 
     class Panel:

@@ -443,8 +443,9 @@ def test_export_follows_render_visibility(tmp_path):
 def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
     """Issue 11, finding 10: one zip per platform of the manifest, named by Blender's tool; each holds the
     license, the manifest (its generated table naming its platform and wheels), tracer/, hud_addon/,
-    presets/, exactly one embreex wheel, the one for its platform, and trimesh; nothing the add-on does
-    not use (tests, benchmarks, docs, README, locks, the Dask driver, Makefile, tools, .ci, .git, caches)."""
+    presets/, exactly one wheel of each project the manifest lists (embreex, trimesh, matplotlib and what it
+    needs), each for its platform or pure Python; nothing the add-on does not use (tests, benchmarks, docs,
+    README, locks, the Dask driver, Makefile, tools, .ci, .git, caches)."""
     import tomllib
     import zipfile
 
@@ -473,9 +474,9 @@ def test_extension_zip_ships_only_what_the_add_on_uses(extension_zip):
         assert not any(n.startswith(("tests/", "benchmarks/", "docs/", "tools/", ".ci/", ".venv")) or n.endswith(".pyc")
                        for n in entries), name
         wheels = sorted(n for n in entries if n.startswith("wheels/"))
-        embreex = [w for w in wheels if project(w) == "embreex"]
-        assert len(embreex) == 1 and fits(platform, embreex[0], macos), (name, wheels)
-        assert [project(w) for w in wheels if w not in embreex] == ["trimesh"], (name, wheels)
+        # One wheel of every project the manifest lists, each for this platform (or pure Python).
+        assert sorted(project(w) for w in wheels) == sorted({project(w) for w in m["wheels"]}), (name, wheels)
+        assert all(fits(platform, w, macos) for w in wheels), (name, wheels)
         generated = tomllib.loads(z.read("blender_manifest.toml").decode())["build"]["generated"]
         assert generated["platforms"] == [platform], (name, generated)
         assert sorted(w.removeprefix("./") for w in generated["wheels"]) == wheels, (name, generated)

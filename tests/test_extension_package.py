@@ -1,7 +1,8 @@
-"""The Blender extension's manifest against the wheels it lists (issue 11, Build item 6), from the wheels'
-file names alone (no network, no bpy): every wheel installs on Blender 4.2-4.5's Python 3.11, and each
-platform the manifest claims gets exactly one embreex wheel that runs there, with what that needs beyond
-Blender itself (macOS 13 for embreex 4.4's macOS wheels) stated in the manifest and the README."""
+"""The Blender extension's manifest against the wheels it lists, from the wheels' file names alone (no
+network, no bpy): every wheel installs on Blender 4.2-4.5's Python 3.11, each platform the manifest claims
+gets exactly one wheel of every compiled project (embreex, matplotlib and what it needs) that runs there,
+with what that needs beyond Blender itself (macOS 13 for embreex 4.4's macOS wheels) stated in the manifest
+and the README, and the wheels are requirements.lock's versions."""
 
 import tomllib
 
@@ -27,19 +28,36 @@ def test_every_wheel_installs_on_python_3_11(wheel):
     assert {(t.interpreter, t.abi) for t in wheel_tags(wheel)} & python_3_11, (
         f"blender_manifest.toml: wheels: {wheel} is not for CPython 3.11 (Blender 4.2-4.5): "
         f"{sorted(map(str, wheel_tags(wheel)))}")
-    if project(wheel) == "embreex":  # compiled: built for CPython 3.11's own ABI
+    if project(wheel) in COMPILED:  # built for CPython 3.11's own ABI
         assert {(t.interpreter, t.abi) for t in wheel_tags(wheel)} == {("cp311", "cp311")}, (
             f"blender_manifest.toml: wheels: {wheel} is not a cp311-cp311 wheel")
 
 
+#: The projects whose wheels are compiled, one per platform; every other wheel is pure Python.
+COMPILED = {project(w) for w in MANIFEST["wheels"] if not any(t.platform == "any" for t in wheel_tags(w))}
+
+
 @pytest.mark.parametrize("platform", MANIFEST["platforms"])
-def test_each_platform_has_exactly_one_embreex_wheel_that_fits_it(platform):
-    found = [w for w in MANIFEST["wheels"] if project(w) == "embreex" and fits(platform, w, MACOS)]
-    assert len(found) == 1, (f"blender_manifest.toml: wheels: {len(found)} embreex wheels for the platform "
-                             f"{platform!r} (glibc 2.28, macOS {MACOS[0]}): {found}")
-    pure = [w for w in MANIFEST["wheels"] if project(w) != "embreex"]
+def test_each_platform_has_exactly_one_wheel_of_each_compiled_project_that_fits_it(platform):
+    assert {"embreex", "matplotlib"} <= COMPILED
+    for name in sorted(COMPILED):
+        found = [w for w in MANIFEST["wheels"] if project(w) == name and fits(platform, w, MACOS)]
+        assert len(found) == 1, (f"blender_manifest.toml: wheels: {len(found)} {name} wheels for the platform "
+                                 f"{platform!r} (glibc 2.28, macOS {MACOS[0]}): {found}")
+    pure = [w for w in MANIFEST["wheels"] if project(w) not in COMPILED]
     assert pure and all(fits(platform, w, MACOS) for w in pure), (
         f"blender_manifest.toml: wheels: not every other wheel fits {platform!r}: {pure}")
+
+
+def test_the_wheels_are_the_locked_versions_and_numpy_is_not_bundled():
+    """What the extension bundles is what `make demo` installs (requirements.lock); numpy is Blender's."""
+    from packaging.utils import parse_wheel_filename
+
+    locked = _pins("requirements.lock")
+    for wheel in MANIFEST["wheels"]:
+        name, version = parse_wheel_filename(wheel.rsplit("/", 1)[-1])[:2]
+        assert locked.get(canonicalize_name(name)) == str(version), (wheel, locked.get(canonicalize_name(name)))
+    assert "numpy" not in {project(w) for w in MANIFEST["wheels"]}
 
 
 def test_no_wheel_is_for_a_platform_the_manifest_does_not_claim():
@@ -95,14 +113,14 @@ def _pins(name: str) -> dict[str, str]:
 
 def test_the_oldest_bpy_lock_is_requirements_lock_with_the_manifests_oldest_bpy():
     """`make test-bpy-oldest` runs the add-on tests on the bpy of blender_version_min, every other package
-    as requirements.lock pins it."""
-    oldest, main = _pins("requirements-bpy42.lock"), _pins("requirements.lock")
+    as requirements.lock and requirements-test.lock pin it."""
+    oldest, main = _pins("requirements-bpy42.lock"), _pins("requirements.lock") | _pins("requirements-test.lock")
     minimum = Version(MANIFEST["blender_version_min"]).release[:2]
     assert Version(oldest.get("bpy", "0")).release[:2] == minimum, (
         f"requirements-bpy42.lock: bpy {oldest.get('bpy')} is not blender_version_min's {minimum}")
     differ = {k: (v, main.get(k)) for k, v in oldest.items() if k != "bpy" and main.get(k) != v}
     assert differ == {}, f"requirements-bpy42.lock: pins that differ from requirements.lock: {differ}"
-    needed = {"numpy", "embreex", "trimesh", "openimageio", "pytest", "setuptools"}
+    needed = {"numpy", "embreex", "trimesh", "openimageio", "matplotlib", "pytest", "setuptools"}
     assert needed <= oldest.keys(), f"requirements-bpy42.lock: missing {sorted(needed - oldest.keys())}"
 
 

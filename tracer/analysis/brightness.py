@@ -107,7 +107,9 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
         if ratio < 1 - MISSING_SHARE and sigma < -MISSING_SIGMA:
             advice = (": light outside an emitter's aim (glass or a lens between it and its target bends the aimed "
                       "light off it) or high-order ghosts; render with the backward method, whose connections find "
-                      "it, or aim at the target's image through the optics" if method in ("forward", "photon") else "")
+                      "it, or aim at the target's image through the optics" if method in ("forward", "photon") else
+                      ": high-order ghosts, whose glass branches beyond the first splits are drawn by chance; render "
+                      "longer, or raise the method's splits")
             out.append(f"the {key} section renders {ratio:.3g} of the brightness-theorem prediction "
                        f"({entry['rendered_cd_m2']:.4g} against {entry['predicted_cd_m2']:.4g} cd/m^2, "
                        f"{-sigma:.3g} combined standard errors below it): the render misses light that reaches the "
