@@ -56,7 +56,7 @@ class Field:
         ``None`` for an optional value with no default (an optional group, an alternative field).
     unit : the physical unit ("cd/m^2", "lm", "mm", "deg", "1" for dimensionless ratios, "" for none).
     minimum, maximum : inclusive bounds of numbers and of each component of vectors (None: unbounded);
-        ``exclusive_min`` makes the lower bound strict.
+        ``exclusive_min`` and ``exclusive_max`` make them strict.
     choices : the allowed strings of a ``choice``.
     label, description : short name and one-sentence tooltip (the add-on shows both).
     fields : the fields of a ``group``.
@@ -74,6 +74,7 @@ class Field:
     minimum: float | None = None
     maximum: float | None = None
     exclusive_min: bool = False
+    exclusive_max: bool = False
     choices: tuple[str, ...] = ()
     label: str = ""
     description: str = ""
@@ -138,11 +139,12 @@ def _vector(ck: FieldChecker, value, fld: str, f: Field, n: int, scalar_ok: bool
         ck.fail(fld, f"expected a list of {n} numbers, got {json.dumps(value)}")
     for i in range(n):
         lo_bad = f.minimum is not None and (v[i] < f.minimum or (f.exclusive_min and v[i] == f.minimum))
-        hi_bad = f.maximum is not None and v[i] > f.maximum
+        hi_bad = f.maximum is not None and (v[i] > f.maximum or (f.exclusive_max and v[i] == f.maximum))
         if lo_bad or hi_bad:
             lo = "-inf" if f.minimum is None else f"{f.minimum:g}"
             hi = "inf" if f.maximum is None else f"{f.maximum:g}"
-            ck.fail(where[i], f"must lie in {'(' if f.exclusive_min else '['}{lo}, {hi}], got {v[i]:g}")
+            opening, closing = "(" if f.exclusive_min else "[", ")" if f.exclusive_max else "]"
+            ck.fail(where[i], f"must lie in {opening}{lo}, {hi}{closing}, got {v[i]:g}")
     return v
 
 
@@ -150,12 +152,14 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
     """The parsed value of field ``f`` from its JSON ``value`` (see the module docstring)."""
     k = f.kind
     if k == "number":
-        return ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum)
+        return ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum,
+                         max_exclusive=f.exclusive_max)
     if k == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             if not (isinstance(value, float) and value.is_integer()):
                 ck.fail(fld, f"expected an integer, got {json.dumps(value)}")
-        return int(ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum))
+        return int(ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum,
+                             max_exclusive=f.exclusive_max))
     if k == "rgb":
         return _vector(ck, value, fld, f, 3, scalar_ok=True)
     if k == "pair":
@@ -196,7 +200,7 @@ def number_field(ck: FieldChecker, f: Field, spec: dict, block: str):
     if isinstance(value, str) and value in f.keywords:
         return value
     return ck.number(value, f"{block}.{f.name}" if block else f.name, min_value=f.minimum,
-                     min_exclusive=f.exclusive_min, max_value=f.maximum)
+                     min_exclusive=f.exclusive_min, max_value=f.maximum, max_exclusive=f.exclusive_max)
 
 
 def parse_block(ck: FieldChecker, spec, fld: str, fields: tuple[Field, ...], root: Path | None = None,

@@ -159,7 +159,8 @@ class FieldChecker:
             allowed = ", ".join(sorted(required | optional)) or "none"
             self.fail(f"{fld}.{k}" if fld else k, f"unknown field (allowed: {allowed})")
 
-    def number(self, value, fld: str, *, min_value=None, min_exclusive=False, max_value=None) -> float:
+    def number(self, value, fld: str, *, min_value=None, min_exclusive=False, max_value=None,
+               max_exclusive=False) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(fld, f"expected a number, got {json.dumps(value)[:40]}")
         try:
@@ -170,8 +171,8 @@ class FieldChecker:
             self.fail(fld, "must be finite")
         if min_value is not None and (v < min_value or (min_exclusive and v == min_value)):
             self.fail(fld, f"must be {'>' if min_exclusive else '>='} {min_value:g}, got {v:g}")
-        if max_value is not None and v > max_value:
-            self.fail(fld, f"must be <= {max_value:g}, got {v:g}")
+        if max_value is not None and (v > max_value or (max_exclusive and v == max_value)):
+            self.fail(fld, f"must be {'<' if max_exclusive else '<='} {max_value:g}, got {v:g}")
         if abs(v) > MAX_ABS:
             self.fail(fld, f"out of range: must lie within +-{MAX_ABS:g}, got {v:g}")
         return v

@@ -1,4 +1,4 @@
-"""report.json: the figures of a render (docs/report.md describes every field), and the readouts a
+"""report.json: the figures of a render (docs/user/report.md describes every field), and the readouts a
 person reads off it (the command line's ``readouts``, Blender's HUD Readouts panel)."""
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ meaning, as :class:`~tracer.core.schema.Schema` objects.
 The loader (:mod:`tracer.scene.load`, :mod:`tracer.scene.environment`) takes each block's keys,
 defaults and ranges from here; the materials' fields are their classes' schemas
 (:data:`tracer.optics.materials.MATERIALS`), the emission block is :data:`tracer.sources.lights.EMISSION`
-and the methods' options are :data:`tracer.scene.methods.METHOD_OPTIONS`. docs/scene-format.md is
+and the methods' options are :data:`tracer.scene.methods.METHOD_OPTIONS`. docs/user/scene-format.md is
 generated from all of them (``python tools/scene_format.py``), and a test fails when it is stale.
 """
 
@@ -83,9 +83,9 @@ EYE = Schema("eye", "Eye", "The observer: a thin-lens eye with a finite pupil an
     Field("resolution", "int2", unit="px", minimum=1, maximum=MAX_RESOLUTION,
           description="Retina pixels [width, height]; the film must fit in half the machine's memory (about 800 "
                       "bytes per pixel and process)"),
-    Field("fov_deg", "vector2", unit="deg", minimum=0.0, exclusive_min=True, maximum=MAX_FOV_DEG,
-          description="Full field of view [horizontal, vertical], each below 170; pixels are square, so the two "
-                      "should keep the resolution's aspect"),
+    Field("fov_deg", "vector2", unit="deg", minimum=0.0, exclusive_min=True, maximum=MAX_FOV_DEG, exclusive_max=True,
+          description="Full field of view [horizontal, vertical]; pixels are square, so the two should keep the "
+                      "resolution's aspect"),
     ANALYSER))
 
 #: The paper's directed split (sec. 2): ``aim`` of an emission or a scattering material, and

@@ -1,5 +1,5 @@
 """Reading a scene folder: scene.json checked block by block against the format
-(:mod:`tracer.scene.format`; docs/scene-format.md), the meshes and images it names loaded, and the
+(:mod:`tracer.scene.format`; docs/user/scene-format.md), the meshes and images it names loaded, and the
 result built as plain data (:mod:`tracer.scene.model`). Every error raises
 :class:`tracer.core.errors.SceneError` naming the file and the JSON field.
 """
