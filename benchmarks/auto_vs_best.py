@@ -1,5 +1,5 @@
 """The automatic choice against the best method chosen by hand: the time each takes to reach a given
-accuracy on each preset (issue 12: auto may be at most 1.5 times slower than the best single method).
+accuracy on each preset (the goal: auto at most 1.5 times slower than the best single method).
 
     .venv/bin/python benchmarks/auto_vs_best.py [--presets P ...] [--seconds 16] [--target 0.05] [--ref-seconds 120]
 

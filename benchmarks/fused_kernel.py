@@ -16,7 +16,7 @@ The second stage: the scatterer's Gaussian lobe density (tracer.core.sampling.ga
 ray), on the calls the same batches make of it (next-event connections and the mixture's densities),
 checked to agree to float32 rounding (numba's exp is the C library's, numpy's its own SIMD one).
 
-This is a measurement for a decision (README, "Speed": the one-process goal needs fused kernels), not
+This is a measurement for a decision (docs/results/speed.md: the one-process goal needs fused kernels), not
 part of the tracer: numba is in requirements-bench.lock only.
 """
 

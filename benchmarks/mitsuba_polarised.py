@@ -1,5 +1,5 @@
 """Polarisation against an independent renderer: Mitsuba 3's polarised variant, its RGB variant and the
-tracer on a windshield and a panel (issue 13).
+tracer on a windshield and a panel.
 
     .venv/bin/python benchmarks/mitsuba_polarised.py [--spp N]
 

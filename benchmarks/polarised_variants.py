@@ -1,6 +1,6 @@
 """hud-direct and its polarised variants (presets/hud_direct_polarised.py): symbol luminance and ghost
-ratio of each, rendered and predicted, beside the closed forms at the windshield's 67 deg (README,
-"Polarisation").
+ratio of each, rendered and predicted, beside the closed forms at the windshield's 67 deg
+(docs/results/polarisation.md).
 
     .venv/bin/python benchmarks/polarised_variants.py [--seconds S] [--workers W]
 

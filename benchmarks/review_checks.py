@@ -13,7 +13,7 @@
 - a sunlit road under a sky (tests/test_analysis.py): the prediction against rho (E sin h / pi + L_sky).
 
 About two minutes on 2 cores. The tests assert the same things with bounds; this prints the numbers the
-README quotes.
+docs/results/ quotes.
 """
 
 from __future__ import annotations

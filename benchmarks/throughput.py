@@ -53,7 +53,7 @@ VARIANTS = {"forward": ("forward", {}), "backward": ("backward", {}),
             "backward, no NEE": ("backward", {"next_event": False}), "photon": ("photon", {})}
 
 
-#: The transport core's goal for one process: this share of the raw Embree rate, end to end (issue 8).
+#: The transport core's goal for one process: this share of the raw Embree rate, end to end.
 GOAL = 0.3
 
 
@@ -210,7 +210,7 @@ def main():
                   + ", ".join(f"{k} {v:.2f}" for k, v in share.items()))
         # Only this process: a spawned worker's ru_maxrss starts from the parent's resident size at the
         # fork that precedes its exec, so RUSAGE_CHILDREN would repeat this figure. A render's own peak:
-        # /usr/bin/time -v hud-trace render ... --workers 1 (README, "Speed").
+        # /usr/bin/time -v hud-trace render ... --workers 1 (docs/results/speed.md).
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(f"peak memory: {own:.0f} MiB (this process, holding every variant's world and the raw rays)")
 

@@ -41,7 +41,7 @@ def _apply_object(obj, spec: dict, by_name: dict, root: Path):
     h = obj.hud
     material = dict(spec["material"])
     emission = spec.get("emission")
-    if material["type"] == LEGACY_EMITTER:  # an absorber that emits, in the files of earlier releases
+    if material["type"] == LEGACY_EMITTER:  # the legacy type: an absorber that emits
         emission, material = {k: v for k, v in material.items() if k != "type"}, {"type": "absorber"}
     schema = MATERIALS[material["type"]].schema
     h.role = material["type"]
@@ -102,7 +102,7 @@ def _use_millimetres(scene, context):
 
 def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]:
     """Create the objects, the eye camera and the world settings of a scene folder in the current
-    scene, in a new collection "HUD <name>" (issue 11, finding 9). With ``replace``, what an earlier
+    scene, in a new collection "HUD <name>". With ``replace``, what an earlier
     preset built and Blender's startup cube go first. A scene that holds nothing else is set to
     millimetres (1 Blender unit = 1 mm); otherwise the preset is built in the scene's own units.
     Returns the new objects and the names of the collections replaced."""

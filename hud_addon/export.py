@@ -251,7 +251,7 @@ def eye_spec(scene, depsgraph=None) -> dict:
     moves the eye): position, gaze (-Z), up (+Y), field from lens and sensor; pupil, focus and the
     analyser (polarised sunglasses) from its HUD Eye settings. Raises ValueError when the scene has no
     active camera, or one the eye cannot be (orthographic or panoramic, or with a shifted lens),
-    naming the camera (issue 11, finding 6)."""
+    naming the camera."""
     cam = scene.camera
     if cam is None or cam.type != "CAMERA":
         raise ValueError("the scene needs an active camera: it is the eye")
@@ -446,7 +446,7 @@ def render_visible(view_layer) -> set[str]:
     """Names of the objects a render of ``view_layer`` shows, as Blender decides for renders: the
     object's own "Disable in Renders" (hide_render) unset, in a collection that is neither excluded
     from the view layer nor disabled in renders anywhere above it. Hiding in the viewport (the eye
-    icon, hide_viewport) does not matter: it is for the viewport (issue 11, finding 3)."""
+    icon, hide_viewport) does not matter: it is for the viewport."""
     names: set[str] = set()
 
     def walk(layer_collection, hidden: bool):
@@ -480,7 +480,7 @@ def _role_on_non_mesh(obj):
 
 
 def exported_objects(depsgraph) -> tuple[list[_Item], dict]:
-    """The objects with an optical role that ``depsgraph`` shows, as evaluated (issue 11, finding 2):
+    """The objects with an optical role that ``depsgraph`` shows, as evaluated:
     at the depsgraph's frame (animation), with modifiers applied, and with every instance
     (collection instances, geometry-node and particle instances) as an object of its own, named
     "<object> @ <instancer> <k>". Returns the items and {mesh key: (vertices, faces, uv) in Blender
@@ -654,8 +654,8 @@ def _in_blender_words(message: str) -> str:
 
 def blender_terms(error, folder: Path, scene) -> str:
     """A tracer SceneError about an exported scene folder, in Blender's terms: the object, World or
-    camera and the property at fault instead of the temporary scene.json and its JSON path (issue 11,
-    finding 4), with a hint where a generated image lost its pixels."""
+    camera and the property at fault instead of the temporary scene.json and its JSON path, with a hint
+    where a generated image lost its pixels."""
     try:
         data = json.loads((Path(folder) / "scene.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):

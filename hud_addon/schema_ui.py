@@ -155,7 +155,7 @@ def _encoding_field(f: Field, fields) -> bool:
 
 
 def image_encoding(image, title: str) -> str:
-    """How the tracer decodes ``image``'s values, from Blender's own setting of it (issue 11, finding 6):
+    """How the tracer decodes ``image``'s values, from Blender's own setting of it:
     a float image holds linear values; a byte image's Color Space says sRGB or linear. Raises
     ValueError naming the image for a colour space the tracer cannot read a transmittance from."""
     space = image.colorspace_settings.name

@@ -4,7 +4,7 @@ The tracer's scene format is in millimetres; a Blender unit is ``scale_length`` 
 Values the add-on stores for the tracer keep the tracer's units (a .blend keeps meaning the same
 whatever its unit settings), and each has a twin that Blender shows in its own unit system (a length
 in the scene's length unit, an angle in its rotation unit), which the panels draw: reading the twin
-converts the stored value, setting it converts back (issue 11, finding 9).
+converts the stored value, setting it converts back.
 """
 
 from __future__ import annotations

@@ -49,7 +49,7 @@ VIEW_DEG = (7.0, 2.6)  # the retina image: a margin around the display
 RESOLUTION = (420, 156)  # 1 arcmin pixels
 PUPIL_MM = 4.0
 GLASS_MM = 4.76
-LED_LUMINANCE = 1.0e9  # cd/m^2 per die (see README: what the design's etendue demands)
+LED_LUMINANCE = 1.0e9  # cd/m^2 per die (docs/theory/designs.md: what the design's etendue demands)
 LED_GRID = (5, 2)  # columns (along x) and rows of LED dies
 LED_PITCH = (7.0, 5.0)  # mm; imaged onto the eye plane magnified d2/d1 = 4.4 times
 SCATTER_SIGMA_DEG = (3.5, 3.0)

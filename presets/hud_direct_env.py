@@ -14,7 +14,7 @@ from .studies import make_study
 NAME = "hud-direct-env"
 SUMMARY = "hud-direct against the day panorama, symbols 10^4 cd/m^2 (paper Fig. 13)"
 #: hud-direct's symbols read 8,324 cd/m^2 (its brightness-theorem prediction with polarisation,
-#: README "Polarisation"): to 10^4.
+#: docs/results/polarisation.md): to 10^4.
 SYMBOL_SCALE = 1.0e4 / 8324.0
 
 

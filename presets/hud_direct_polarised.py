@@ -1,4 +1,4 @@
-"""hud-direct with polarised light (issue 13): an LCD picture generation unit whose output polariser
+"""hud-direct with polarised light: an LCD picture generation unit whose output polariser
 sends s light to the windshield, the same seen through polarised sunglasses, and with a half-wave
 film that turns it into p light, which the sunglasses pass.
 
@@ -16,7 +16,7 @@ cross the glass as separate channels (ghost ratio [(1-Rs)^2 Rs + (1-Rp)^2 Rp] / 
   deg turns the s light into p light: the windshield reflects R_p = 0.021 (8 times less than s
   light), the ghost ratio is (1 - R_p)^2 = 0.958, and the sunglasses pass it.
 
-Numbers: README, "Polarisation"; tests/test_polarisation.py.
+Numbers: docs/results/polarisation.md.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ LCD_TO_CONDENSER = 1.0  # gap between the LCD and the condenser's flat face, mm
 CONDENSER_TO_COLLIMATOR = 10.0  # gap between the two lenses' vertices, mm
 LED_COUNT = 3
 LED_PITCH = 0.8  # mm, along x
-#: cd/m^2 per die: symbols of about 10^4 cd/m^2 at the eye, the paper's Fig. 9 (README: a Lambertian
+#: cd/m^2 per die: symbols of about 10^4 cd/m^2 at the eye, the paper's Fig. 9 (docs/theory/designs.md: a Lambertian
 #: screen spreads its light over pi sr, of which the eyebox takes a few 1e-5, so this design needs
 #: about 12,000 lm per die; real rear-projection screens concentrate it with gain).
 LED_LUMINANCE = 9.2e10

@@ -15,7 +15,7 @@ from .studies import make_study
 NAME = "hud-screen-day"
 SUMMARY = "hud-screen against a day panorama (2140 cd/m^2 in view), symbols 1600 cd/m^2 (paper Fig. 8)"
 #: hud-screen's symbols as an eye in the studies' view sees them, cd/m^2 (hud-screen-night at scale 1,
-#: 120 s hybrid render, README; with the windshield's s and p light apart, 10 % below the 10^4 cd/m^2
+#: 120 s hybrid render, docs/results/studies.md; with the windshield's s and p light apart, 10 % below the 10^4 cd/m^2
 #: the preset was designed for with the unpolarised Fresnel average).
 HUD_SCREEN_SYMBOLS_CD_M2 = 9019.0
 #: Symbol luminance of the study over hud-screen's.

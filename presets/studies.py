@@ -9,7 +9,7 @@ The panoramas are Blender's own studio lights, found inside the bpy package (pre
 image is committed. The paper's panoramas are not published, so each study keeps one of its figures:
 the day panorama is scaled so that the directions the eye sees average the paper's adaptation
 luminance (a whole panorama's mean is mostly its sun), the night panorama's minimum is the paper's
-34 cd/m^2; the README sets the other figures beside the paper's.
+34 cd/m^2; docs/results/studies.md sets the other figures beside the paper's.
 """
 
 from __future__ import annotations

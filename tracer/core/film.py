@@ -20,8 +20,8 @@ Sums merge exactly: a film from another process adds to this one term by term (t
 batches in batch order, so the same batches give the same image bit for bit). A per-pixel array of a
 batch that is zero in most pixels (a forward batch: a few thousand particles on the retina; a
 backward batch's paths that hit a source) travels as its non-zero columns only (:class:`Columns`;
-hud-direct: a forward batch 0.14 MiB instead of 3.5, backward 3.5 instead of 6.0); adding it gives
-the same bits as adding the dense array, whose other columns are zeros.
+on hud-direct a forward batch's film is 0.14 MiB, a backward one's 3.5 MiB); adding it gives the
+same bits as adding the dense array, whose other columns are zeros.
 
 Groups. Components traced independently of each other (the hybrid method's channels: each its own
 method, its own random streams, its own replicates) form groups; each group keeps its own replicate

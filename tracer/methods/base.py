@@ -379,7 +379,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     are merged until every replicate group of the film holds :data:`MIN_REPLICATES` replicates (one
     batch for most methods; two where a batch is one replicate, as a backward batch of fewer paths than
     twice the pixels is), so that an image is never empty for lack of time and its error bars are
-    measured (they come from the replicates' spread: a single replicate gave 0 +- 0). A time budget counts
+    measured (they come from the replicates' spread, which one replicate does not have). A time budget counts
     from ``started`` (``time.perf_counter()`` when the render began: the pilot and the workers'
     start-up are part of the wall time the user gave), by default from now. ``preview(film)`` is
     called with the merged film after a merge, at most every :data:`PREVIEW_SECONDS` (not after the

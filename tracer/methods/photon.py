@@ -348,8 +348,7 @@ class PhotonTracer(BackwardTracer):
         """Warn, before the pilot, of a ``radius_mm`` far larger than the automatic one can be: each
         visibility point gathers every photon of a disk that size, so that the number of pairs, the time
         of a batch (and of a stop, which waits for it) and the blur grow with its square (10 mm on
-        hud-screen, 107 pixel footprints: 4,487 photons per point and 500 s for 200,000 rays; a
-        hand-built input)."""
+        hud-screen, 107 pixel footprints: 4,487 photons per point and 500 s for 200,000 rays)."""
         footprint = self.footprint(rng)
         if footprint > 0 and self.r0 > GIVEN_RADIUS_WARN * MAX_FOOTPRINT_RADII * footprint:
             self.warn_early(
@@ -517,11 +516,10 @@ class PhotonTracer(BackwardTracer):
         """The second strategy of a visibility point's direct light: one direction from the surface's
         law (its eye sampler, as backward tracing's paths draw it), one closest-hit ray, and what it
         meets, an emitter or the environment, weighted against the connection's density (the power
-        heuristic of :meth:`emitted` and :meth:`escaped`), into the "connection" component. Without it
-        a connection alone estimates the light of a large emitter close to the surface (a backlight
-        1 mm behind a diffuser) from the rare points right behind the sample: 150 times too low at 10
-        million rays, with error bars that cannot show it (found by a hand-built scene). The eye
-        path itself still ends here; the photons carry what this ray finds after other events."""
+        heuristic of :meth:`emitted` and :meth:`escaped`), into the "connection" component. A connection
+        alone misses most of a large emitter close to the surface (a backlight 1 mm behind a diffuser),
+        whose light comes from a small patch right under the point; this ray finds it. The eye path
+        itself still ends here; the photons carry what this ray finds after other events."""
         m = len(state)
         nxt = Next.for_hits(state, 0)
         continue_by_sampling(state, it, self._eye_sampler[id(bsdf)], ctx, RADIANCE, nxt, slice(0, m))

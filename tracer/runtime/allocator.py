@@ -3,11 +3,8 @@
 Each bounce of the path loop allocates and frees tens of numpy arrays of 0.25 to 3 MiB. glibc's
 malloc serves blocks above its mmap threshold (128 KiB at start, raised as blocks are freed) with
 fresh pages from the kernel, and returns the top of its heap to the kernel once more than its trim
-threshold is free; either way the next bounce faults the same pages in again. Measured on
-hud-direct (one process, 12 s): backward tracing spent 9 to 15 % of its time in the kernel on 35,000
-to 80,000 page faults a second, and ran 14 % faster with next-event estimation and 21 % faster
-without it once both thresholds were raised (forward tracing, whose arrays are smaller, is
-unchanged); the peak resident memory stayed within 2 %.
+threshold is free; either way the next bounce faults the same pages in again (on hud-direct, 9 to 15 %
+of a backward render's time in the kernel; the gain is in docs/results/speed.md).
 
 :func:`keep_freed_memory` raises both thresholds (mallopt, glibc only; elsewhere it does nothing).
 It changes the whole process, so it is called where a process exists to trace: the command line,

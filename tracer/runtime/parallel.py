@@ -228,8 +228,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
         result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop, f"x{workers}",
                        started=started, preview=preview)
         # Batches still in flight are not needed, but the workers finish them (at most two each, of a
-        # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() then hung
-        # now and then in CPython's task handler (waiting for the inqueue's lock, never released).
+        # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
+        # CPython's task handler (waiting for the inqueue's lock, never released).
         pool.close()
         pool.join()
     result.extra["workers"] = workers

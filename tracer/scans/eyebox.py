@@ -248,7 +248,7 @@ class EyeboxResult:
           ``edges_mm`` {left, right, bottom, top}; ``reaches_scan_edge``: the region touches the
           scan's border, so the eyebox may be larger (widen the scan).
         - ``grid_width_mm``, ``grid_height_mm``: the span between the region's outermost grid points
-          (a lower bound; what benchmarks/eyebox.py printed before).
+          (a lower bound of the extent).
         - ``field_average_cd_m2``: the mean of the five field points' luminance, its minimum and
           maximum over the eyebox with the offsets (mm, right and up) where they occur.
         - ``uniformity``: ``design_eye`` = min / max of the five field points' luminance at the design

@@ -185,8 +185,8 @@ TOP = Schema("scene", "Scene", "The top level of scene.json", (
           description='"auto": Stokes vectors wherever an element polarises (a dielectric, a metal, an s/p coating, '
                       'an LCD polariser, a polarised source, an analyser); "off": the unpolarised Fresnel average '
                       "of RGB renderers (a scene that needs polarisation is then refused)"),
-    Field("backward", "group", None, description='Read as methods.backward (files of earlier releases)'),
-    Field("forward", "group", None, description='Read as methods.forward (files of earlier releases)')))
+    Field("backward", "group", None, description="The legacy place of methods.backward, read as it"),
+    Field("forward", "group", None, description="The legacy place of methods.forward, read as it")))
 
 #: Every number without a range of its own lies within +-MAX_ABS.
 NUMBER_LIMIT = MAX_ABS

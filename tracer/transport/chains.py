@@ -43,26 +43,20 @@ from ..optics.materials import LCD
 from .path import Context, PathMethod, PathState, Roulette, Timers, segment_to, trace
 
 #: The analysis drops branches whose transfer factor falls below this fraction (of the brightest
-#: source's luminance: the roulette's reference is MIN_FACTOR / Roulette.EPSILON of it). A chain
-#: through an LCD's black cells starts near 2e-5 (hud-direct), so 1e-5 dropped its higher-order
-#: ghosts (the black background 1.3 % low). Polarised sunglasses across an s-polarised HUD
-#: (hud-direct-s-sunglasses) pass 2e-5 of the symbols, so 1e-7 dropped most of what they pass: the
-#: symbols were predicted from a smaller mask at 0.298 cd/m^2 where backward tracing renders 0.349
-#: +- 0.004 (13 standard errors); at 1e-10 and 1e-12 the mask is the full one and the prediction
-#: 0.2396 against 0.2364 +- 0.0034 rendered. hud-direct's background gains its last 0.09 % (34.572 ->
-#: 34.603 cd/m^2), for 0.07 s more analysis (0.59 s; measured by the review of 2026-12-04).
+#: source's luminance: the roulette's reference is MIN_FACTOR / Roulette.EPSILON of it): far below the
+#: weakest chain an image needs, a chain through an LCD's black cells (about 2e-5 on hud-direct) and
+#: its higher-order ghosts, or what polarised sunglasses pass of an s-polarised HUD (2e-5).
 MIN_FACTOR = 1e-12
 #: Quadrature cells of a light triangle are at most this fraction of its distance to the nearest
 #: scattering surface (relative error of the centroid rule ~ its square, 1e-4).
 QUAD_RATIO = 0.01
 #: A (surface point, quadrature cell) pair whose cell is larger than this fraction of its distance is
 #: not resolved: the finest level (``level`` of :func:`quadrature_levels`) cannot follow a large light
-#: close to a surface, such as a backlight 1 mm behind a screen, whose prediction came out 4.7 times
-#: too bright (a hand-built scene). Such pairs' light is tallied apart (``coarse`` of the leaves), so
-#: that the sections it carries are marked not comparable. The centroid rule's error against Lambert's
-#: contour formula, over a square light 100 mm away (points under its centre, a sixth and a third of
-#: the way out), with cells of 0.71, 1.0, 1.41, 2.0 and 2.8 times the distance: at most 1.2, 1.7,
-#: 3.1, 8.5 and 26 %; analytic-disk's fan cells (0.12 of it) 0.1 %.
+#: close to a surface, such as a backlight 1 mm behind a screen. Such pairs' light is tallied apart
+#: (``coarse`` of the leaves), so that the sections it carries are marked not comparable. The centroid
+#: rule's error against Lambert's contour formula, over a square light 100 mm away (points under its
+#: centre, a sixth and a third of the way out), with cells of 0.71, 1.0, 1.41, 2.0 and 2.8 times the
+#: distance: at most 1.2, 1.7, 3.1, 8.5 and 26 %; analytic-disk's fan cells (0.12 of it) 0.1 %.
 QUAD_TRUST = 1.0
 #: Point pairs (surface point, quadrature point) per shadow-ray call.
 CHUNK = 1 << 16
