@@ -46,7 +46,7 @@ BLENDER_EXT = $(VENV)/lib/python3.11/site-packages/bpy/4.5/scripts/addons_core/b
 extension: $(TEST_STAMP)
 	$(PY) tools/build_extension.py --blender-ext $(BLENDER_EXT) --output-dir dist
 
-# The add-on tests (tests/test_blender_addon.py) on the oldest bpy the manifest allows (blender_version_min
+# The add-on tests (tests/addon/) on the oldest bpy the manifest allows (blender_version_min
 # 4.2.0): bpy 4.2.23, the latest 4.2 patch on PyPI, in its own .venv-bpy42 from requirements-bpy42.lock (the
 # pins of requirements.lock but bpy). Not part of `make test` or .ci/run: the venv takes a 350 MB download and
 # about 45 s, the 15 tests about 55 s on 2 cores.
@@ -62,7 +62,7 @@ $(STAMP42): requirements-bpy42.lock pyproject.toml
 
 .PHONY: test-bpy-oldest
 test-bpy-oldest: $(STAMP42)
-	$(VENV42)/bin/python -m pytest -q tests/test_blender_addon.py
+	$(VENV42)/bin/python -m pytest -q tests/addon
 
 # Speed against accuracy: charts in docs/images/, CSVs in benchmarks/results/ (about 55 minutes on 2 cores: references,
 # 7 presets x 4 method variants x 31 s of budgets, Mitsuba's 7 x 2 x 31 s, the throughput runs (the

@@ -3,9 +3,10 @@ tracer on a windshield and a panel.
 
     .venv/bin/python benchmarks/mitsuba_polarised.py [--spp N]
 
-The scene is tests/test_polarisation.py's: a glass plate (n = 1.52) met at 67 deg reflects a 1000 cd/m^2
-Lambertian panel into the eye. Each renderer gives the panel's luminance seen through the plate over
-its luminance seen directly (a ratio, so that Mitsuba's spectral upsampling of RGB drops out):
+The scene is tests/optics/test_polarisation.py's (plate_scene of tests/support/scenes.py): a glass plate
+(n = 1.52) met at 67 deg reflects a 1000 cd/m^2 Lambertian panel into the eye. Each renderer gives the
+panel's luminance seen through the plate over its luminance seen directly (a ratio, so that Mitsuba's
+spectral upsampling of RGB drops out):
 
 1. a 4.76 mm plate, unpolarised panel: the plate's reflectance with all its internal reflections,
    the mean over s and p of R + T^2 R / (1 - R^2) (0.2282); an RGB renderer's unpolarised Fresnel
@@ -33,7 +34,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
 import mitsuba as mi  # noqa: E402
 
@@ -122,7 +122,8 @@ def ours(folder: Path, rays: int, seed: int = 3) -> tuple[np.ndarray, float]:
 
 
 def main():
-    from test_polarisation import _plate_scene, fresnel_angles, plate_total
+    from tests.support.optics import fresnel_angles, plate_total
+    from tests.support.scenes import plate_scene
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--spp", type=int, default=256)
@@ -138,7 +139,7 @@ def main():
         got = {v: ratio_se(mitsuba_y(v, args.spp, thickness=4.76, polariser_deg=None, direct=False, **small),
                            mitsuba_y(v, args.spp, thickness=None, polariser_deg=None, direct=True, **small))
                for v in (pol_v, rgb_v)}
-        y, se = ours(_plate_scene(tmp / "u"), 400_000)
+        y, se = ours(plate_scene(tmp / "u"), 400_000)
         rows.append(("4.76 mm plate, unpolarised panel: reflectance", closed, (y.mean() / 1000, se / 1000), got[pol_v],
                      got[rgb_v]))
         # 2. through a polariser sheet turned to 0 and 90 deg: the brighter is s light.
@@ -148,7 +149,7 @@ def main():
         m_s, m_p = sorted(pol.values(), key=lambda v: -v[0])
         for light, closed_v, m in (("s", plate_total(rs), m_s), ("p", plate_total(rp), m_p)):
             axis = 0.0 if light == "s" else 90.0
-            y, se = ours(_plate_scene(tmp / light, emitter={"polarisation": {"axis_deg": axis}}), 400_000)
+            y, se = ours(plate_scene(tmp / light, emitter={"polarisation": {"axis_deg": axis}}), 400_000)
             rows.append((f"4.76 mm plate, {light} light: reflectance", closed_v, (y.mean() / 1000, se / 1000), m, None))
         # 3. the ghost apart: 20 mm plate, a strip, the images on different rows.
         tall = {"res": (16, 48), "fov_deg": (1.6, 6.0), "strip": True}
@@ -156,8 +157,8 @@ def main():
                               mitsuba_y(v, args.spp // 4, thickness=20.0, polariser_deg=None, direct=False, **tall)])
                   for v in (pol_v, rgb_v)}
         # The tracer: the spread of four seeds, as Mitsuba's.
-        ghosts = [_ghost_ratio(ours(_plate_scene(tmp / f"g{k}", 20.0, strip=True, resolution=(4, 48),
-                                                 fov=(0.4, 6.0)), 200_000, seed=3 + k)[0].sum(axis=1))
+        ghosts = [_ghost_ratio(ours(plate_scene(tmp / f"g{k}", 20.0, strip=True, resolution=(4, 48),
+                                                fov=(0.4, 6.0)), 200_000, seed=3 + k)[0].sum(axis=1))
                   for k in range(4)]
         rows.append(("20 mm plate, strip: ghost / primary (image rows)", None, mean_se(ghosts), ratios[pol_v],
                      ratios[rgb_v]))

@@ -2,15 +2,15 @@
 
     .venv/bin/python benchmarks/review_checks.py
 
-- analytic-mirror behind a 20 mm glass block (tests/test_analysis.py): each method's image section
-  against the brightness-theorem prediction L R T_slab, and the panel's aim coverage, after the render
+- analytic-mirror behind a 20 mm glass block (tests/support/scenes.py, tests/analysis/): each method's
+  image section against the brightness-theorem prediction L R T_slab, and the panel's aim coverage, after the render
   and before the first ray (with the time that takes on it, hud-direct and analytic-disk);
-- a ring lighting a floor through a coarse smoothed mirror (tests/test_transport.py): backward and
+- a ring lighting a floor through a coarse smoothed mirror (tests/optics/test_bsdf.py): backward and
   forward tracing over three seeds, with and without the adjoint factor for shading normals;
-- a diffuse screen over a 200 mm panel (tests/test_analysis.py): the analysis' quadrature against
-  Lambert's contour formula for gaps whose cells are 71 to 0.35 times the distance, and the photon
-  method 1 mm over a 100 mm disk (tests/test_photon.py) against tau E / pi;
-- a sunlit road under a sky (tests/test_analysis.py): the prediction against rho (E sin h / pi + L_sky).
+- a diffuse screen over a 200 mm panel (tests/analysis/test_brightness.py): the analysis' quadrature
+  against Lambert's contour formula for gaps whose cells are 71 to 0.35 times the distance, and the photon
+  method 1 mm over a 100 mm disk (tests/methods/test_photon.py) against tau E / pi;
+- a sunlit road under a sky (tests/analysis/test_brightness.py): the prediction against rho (E sin h / pi + L_sky).
 
 About two minutes on 2 cores. The tests assert the same things with bounds; this prints the numbers the
 docs/results/ quotes.
@@ -27,13 +27,13 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-
-from test_analysis import _backlit_screen, _mirror_behind_glass, _square_view_factor, _sunlit_road  # noqa: E402
-from test_photon import _screen  # noqa: E402
-from test_transport import _ring_under_a_smoothed_dome  # noqa: E402
+sys.path.insert(0, str(ROOT))
 
 from presets import PRESETS  # noqa: E402
+from tests.analysis.test_brightness import _backlit_screen, _square_view_factor, _sunlit_road  # noqa: E402
+from tests.methods.test_photon import _screen  # noqa: E402
+from tests.optics.test_bsdf import _ring_under_a_smoothed_dome  # noqa: E402
+from tests.support.scenes import mirror_behind_glass  # noqa: E402
 from tracer.analysis.aims import aim_preflight  # noqa: E402
 from tracer.analysis.brightness import brightness_theorem  # noqa: E402
 from tracer.core.units import Y_WEIGHTS  # noqa: E402
@@ -46,7 +46,7 @@ from tracer.transport.world import World  # noqa: E402
 
 
 def glass_block(tmp: Path):
-    folder = _mirror_behind_glass(lambda name, **kw: PRESETS[name].write(tmp / name, **kw))
+    folder = mirror_behind_glass(lambda name, **kw: PRESETS[name].write(tmp / name, **kw))
     print("analytic-mirror behind a glass block, 2,000,000 rays, seed 1:")
     for method in ("forward", "backward", "photon"):
         report = render_scene(load_scene(folder), method, Budget(rays=2_000_000), 1, tmp / method)[0]

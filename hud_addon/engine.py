@@ -38,7 +38,8 @@ from ..tracer.products.render import render_products, run_render
 from ..tracer.products.report import finite_json
 from ..tracer.scene import load_scene
 from ..tracer.transport.world import World
-from .export import blender_terms, export_scene, generated_image_warnings
+from .export import export_scene
+from .messages import blender_terms, generated_image_warnings
 
 #: Extra passes written beside Combined: name -> (channels, channel ids, Blender pass type).
 PASSES = {"Y": (1, "X", "VALUE"), "Y_noise": (1, "X", "VALUE")}

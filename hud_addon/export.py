@@ -4,22 +4,20 @@ Only objects with an optical role that a render shows are exported, as the depsg
 (:func:`exported_objects`: at its frame, modifiers applied, every instance an object of its own);
 Blender units (the scene's unit scale) become millimetres. The active camera, as evaluated, is the
 eye; the World's HUD settings are the environment, and a rendered Sun light its sun.
-:func:`blender_terms` turns the tracer's errors
-about an exported folder back into the Blender objects and properties they come from.
+(:mod:`.messages` turns the tracer's errors about an exported folder back into the Blender objects and
+properties they come from.)
 
 An export is written as a set (:func:`export_scene`): first everything that can be checked in Blender
 is checked (camera, images, aim objects) and the scene description is built with nothing written; then
-every file goes into a hidden staging folder beside the target, the staging folder is checked, and only
-then it takes the target's place. A failure at any step leaves an earlier export in the target exactly
-as it was.
+every file goes into a hidden staging folder beside the target (:mod:`.export_files`), the staging
+folder is checked, and only then it takes the target's place. A failure at any step leaves an earlier
+export in the target exactly as it was.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import re
 import shutil
 import sys
 import uuid
@@ -29,8 +27,6 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..presets._build import write_obj
-from ..tracer.core.imageio import write_exr
 from ..tracer.optics.materials import MATERIALS
 from ..tracer.products.outputs import replace_folder
 from ..tracer.scene import ANALYSER
@@ -38,112 +34,8 @@ from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
 from ..tracer.sources.sun import SUN_MAX_ANGULAR_DIAMETER_DEG
 from . import schema_ui
+from .export_files import FileNames, Plan, check_replaceable, check_staged, mesh_writer, target_folder
 from .units import unit_mm
-
-#: What an export folder holds; a folder holding anything else is not replaced (see _check_replaceable).
-EXPORT_ENTRIES = frozenset({"scene.json", "meshes", "textures"})
-#: Files the file manager of an OS puts into any folder it shows: replaced along with an export.
-_OS_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
-#: File names Windows refuses whatever their extension.
-_WINDOWS_RESERVED = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
-                               *(f"LPT{i}" for i in range(1, 10))})
-
-
-class _FileNames:
-    """Unique, readable file stems within one folder of the export.
-
-    A stem is the name made safe for file systems (``bpy.path.clean_name``); when that stem is taken,
-    "-2", "-3", ... is appended. Stems are compared case-insensitively, so that no two files of an
-    export collide on the case-insensitive file systems of Windows and macOS either. The same claims
-    in the same order give the same stems.
-    """
-
-    def __init__(self):
-        self._taken: set[str] = set()
-
-    def claim(self, name: str) -> str:
-        base = bpy.path.clean_name(name) or "unnamed"
-        if base.upper() in _WINDOWS_RESERVED:
-            base += "_"
-        stem, k = base, 1
-        while stem.casefold() in self._taken:
-            k += 1
-            stem = f"{base}-{k}"
-        self._taken.add(stem.casefold())
-        return stem
-
-
-class _Plan:
-    """The files of one export, each checked when it is planned and written only by :meth:`write`.
-
-    ``files`` maps a path relative to the export folder to the function that writes it (given the
-    absolute path to write to).
-    """
-
-    def __init__(self):
-        self.files: dict[str, Callable[[Path], None]] = {}
-        self.textures = _FileNames()
-
-    def add(self, rel: str, write: Callable[[Path], None]) -> str:
-        assert rel not in self.files, rel  # stems are unique
-        self.files[rel] = write
-        return rel
-
-    def image(self, image, name: str, what: str) -> str:
-        """Plan a texture file for ``image`` named after ``name`` (made unique); returns its path
-        relative to the folder. Raises ValueError, naming ``what``, the image and, for an image
-        kept in a file, the file's path, when the image cannot be read."""
-        suffix, write = _image_writer(image, what)
-        return self.add(f"textures/{self.textures.claim(name)}{suffix}", write)
-
-    def write(self, folder: Path):
-        """Write every planned file under ``folder``."""
-        for rel, write in self.files.items():
-            path = folder / rel
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write(path)
-
-
-def _image_writer(image, what: str) -> tuple[str, Callable[[Path], None]]:
-    """(file suffix, write(path)) of an image, checked now: an image kept in a file (not packed) is
-    copied as it is, and that file must exist and be readable; a packed or generated image is
-    written as EXR with its pixel values as stored, and must have pixels.
-
-    Raises ValueError "<what> image '<name>' cannot be read: <path> (<reason>)" or
-    "<what> image '<name>' has no pixels".
-    """
-    label = f"{what} image {image.name!r}"
-    raw = image.filepath_raw or image.filepath
-    src = Path(bpy.path.abspath(raw)) if raw else None
-    from_file = image.packed_file is None and src is not None and (image.source == "FILE" or src.is_file())
-    if from_file:
-        reason = None
-        if not src.exists():
-            reason = "file not found"
-        elif not src.is_file():
-            reason = "not a file"
-        else:
-            try:
-                with open(src, "rb") as fh:
-                    if not fh.read(1):
-                        reason = "empty file"
-            except OSError as e:
-                reason = e.strerror or str(e)
-        if reason is not None:
-            raise ValueError(f"{label} cannot be read: {src} ({reason})")
-        return src.suffix.lower(), lambda path: shutil.copyfile(src, path)
-    w, h = image.size
-    if w == 0 or h == 0:
-        raise ValueError(f"{label} has no pixels")
-
-    def write(path: Path):
-        px = np.empty(w * h * image.channels, dtype=np.float32)
-        image.pixels.foreach_get(px)
-        px = px.reshape(h, w, image.channels)[::-1]  # Blender's row 0 is the bottom row
-        rgb = px[..., :3] if image.channels >= 3 else np.repeat(px[..., :1], 3, axis=2)
-        write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
-
-    return ".exr", write
 
 
 def _mesh_arrays(evaluated, with_uv: bool):
@@ -170,11 +62,6 @@ def _mesh_arrays(evaluated, with_uv: bool):
         evaluated.to_mesh_clear()
 
 
-def _mesh_writer(co: np.ndarray, tri: np.ndarray, uv, mm: float) -> Callable[[Path], None]:
-    """write(path) of a mesh's arrays as OBJ in millimetres."""
-    return lambda path: write_obj(path, co * mm, tri, uv)
-
-
 def _matrix_mm(matrix, mm: float) -> list[list[float]]:
     """A world matrix (Blender units) with its translation in millimetres."""
     m = np.array(matrix, dtype=np.float64)
@@ -198,7 +85,7 @@ def _aim_spec(obj, prefix: str) -> dict | None:
     return {"target": target, "share": getattr(h, f"{prefix}aim_share"), "mode": getattr(h, f"{prefix}aim_mode")}
 
 
-def material_spec(obj, plan: _Plan, stem: str) -> dict:
+def material_spec(obj, plan: Plan, stem: str) -> dict:
     """The scene.json material block of an object from its HUD role and the role's schema fields;
     its images are checked and planned as textures named "<field>_<stem>" (made unique).
     Raises ValueError naming the object and the field."""
@@ -353,7 +240,7 @@ def sun_spec(depsgraph) -> dict | None:
             "angular_diameter_deg": diameter, "color": sun["color"]}
 
 
-def environment_spec(scene, plan: _Plan, depsgraph) -> dict:
+def environment_spec(scene, plan: Plan, depsgraph) -> dict:
     """The scene.json environment block from the World's HUD settings, with the sun of the rendered Sun
     light as ``depsgraph`` evaluates it (:func:`sun_spec`); an HDRI panorama is checked and planned as the
     texture "environment". Raises ValueError starting "World:" (with the image's file path when its file
@@ -379,67 +266,9 @@ def _mesh_stems(items) -> dict[str, str]:
     """A unique file stem per exported object name (see _FileNames). Names that are already clean
     claim first, then the others, each group by name: "m_a" keeps m_a, "m.a" gets m_a-2, whatever the
     order of the objects in the scene."""
-    names = _FileNames()
+    names = FileNames()
     order = sorted((i.name for i in items), key=lambda n: (bpy.path.clean_name(n) != n, n))
     return {n: names.claim(n) for n in order}
-
-
-def _image_fields(block: dict, fields) -> list[str]:
-    """The image paths of a (material) block, groups included."""
-    out = []
-    for f in fields:
-        if f.name in block and f.kind == "image":
-            out.append(block[f.name])
-        elif f.name in block and f.kind == "group":
-            out += _image_fields(block[f.name], f.fields)
-    return out
-
-
-def _check_staged(staging: Path, target: Path, planned) -> None:
-    """Raise ValueError unless scene.json in ``staging`` parses and every file it references, and
-    every planned file, exists there and is not empty."""
-    try:
-        data = json.loads((staging / "scene.json").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ValueError(f"the export to {target} could not be checked: scene.json: {e}") from None
-    refs = set(planned)
-    for o in data["objects"]:
-        refs.add(o["mesh"])
-        refs.update(_image_fields(o["material"], MATERIALS[o["material"]["type"]].schema.fields))
-    if "file" in data["environment"]:
-        refs.add(data["environment"]["file"])
-    bad = [rel for rel in sorted(refs) if not (staging / rel).is_file() or (staging / rel).stat().st_size == 0]
-    if bad:
-        raise ValueError(f"the export to {target} is incomplete: {', '.join(bad)} missing or empty")
-
-
-def _target_folder(folder) -> Path:
-    """The absolute folder an export replaces: a symbolic link is followed (the link stays valid)."""
-    target = Path(os.path.abspath(folder))
-    if target.is_symlink():
-        target = Path(os.path.realpath(target))
-    if not target.name:
-        raise ValueError(f"cannot export into {target}: choose a folder (it is replaced as a whole)")
-    return target
-
-
-def _check_replaceable(target: Path) -> None:
-    """Raise ValueError unless ``target`` is absent, empty, or an earlier export (scene.json, meshes/,
-    textures/ and nothing else): an export replaces its folder as a whole, and must never take a
-    user's other files with it."""
-    if not target.exists():
-        return
-    if not target.is_dir():
-        raise ValueError(f"cannot export into {target}: it is a file, not a folder")
-    entries = {p.name for p in target.iterdir()} - _OS_FILES
-    if not entries:
-        return
-    foreign = sorted(entries - EXPORT_ENTRIES)
-    if foreign or "scene.json" not in entries:
-        what = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "") if foreign else "no scene.json"
-        raise ValueError(f"cannot export into {target}: it holds files that are not a HUD scene export ({what}); "
-                         "choose an empty or new folder, or an earlier export (an export replaces its folder as a "
-                         "whole)")
 
 
 def render_visible(view_layer) -> set[str]:
@@ -559,10 +388,10 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
       it is replaced as a whole.
     """
     scene = depsgraph.scene
-    target = _target_folder(folder)
-    _check_replaceable(target)
+    target = target_folder(folder)
+    check_replaceable(target)
     mm = unit_mm(scene)
-    plan = _Plan()
+    plan = Plan()
     eye = eye_spec(scene, depsgraph)
     environment = environment_spec(scene, plan, depsgraph)
     items, meshes = exported_objects(depsgraph)
@@ -573,7 +402,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
         obj = item.original
         if item.mesh_key not in mesh_files:
             co, tri, uv = meshes[item.mesh_key]
-            mesh_files[item.mesh_key] = plan.add(f"meshes/{stems[item.name]}.obj", _mesh_writer(co, tri, uv, mm))
+            mesh_files[item.mesh_key] = plan.add(f"meshes/{stems[item.name]}.obj", mesh_writer(co, tri, uv, mm))
         entry = {"name": item.name, "mesh": mesh_files[item.mesh_key],
                  "transform": {"matrix": _matrix_mm(item.matrix, mm)},
                  "material": material_spec(obj, plan, stems[item.name])}
@@ -595,7 +424,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     try:
         plan.write(staging)
         (staging / "scene.json").write_text(text, encoding="utf-8")
-        _check_staged(staging, target, plan.files)
+        check_staged(staging, target, plan.files)
         if check is not None:
             check(staging)
         leftover = replace_folder(staging, target)
@@ -608,129 +437,3 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     return Path(folder)
 
 
-#: The export's own relative file names at the start of a tracer message ("'textures/x.exr': ...").
-_EXPORT_FILE = re.compile(r"^'?(?:textures|meshes)/[^':]*'?:\s*")
-
-
-#: The Blender terms of the fields of the environment's sun block.
-_SUN_TERMS = {"direction": "rotation", "illuminance_lux": "HUD Sun > Illuminance", "angular_diameter_deg": "Angle",
-              "color": "Color"}
-#: World > HUD Environment's labels of the environment block's fields (the image's own: "file").
-_ENVIRONMENT_TERMS = {"type": "Environment", "luminance": "Luminance", "color": "Color",
-                      "calibration": "Calibration", "calibration.mode": "Calibration",
-                      "calibration.value": "Value", "rotation_deg": "Rotation"}
-
-
-#: How the tracer says, in scene.json's terms, that an element needs polarisation on (tracer.scene).
-_POLARISATION_OFF = re.compile(r'remove "polarisation": "off"(?: \(or this block\))?')
-
-
-def _image_hint(image) -> str:
-    """Why a generated image may hold none of the pixels the user made: only where Blender has
-    regenerated it (it is not dirty: not painted or filled since it was made or the file was opened);
-    an image whose pixels are in memory, and wrong, gets no hint."""
-    if image is not None and image.source == "GENERATED" and image.packed_file is None and not image.is_dirty:
-        return (f" (image {image.name!r} is a generated image that is not packed: Blender does not save its pixels "
-                "with the .blend and regenerates them when the file is opened; pack it with Image > Pack, or save it "
-                "to a file)")
-    return ""
-
-
-def _in_blender_words(message: str) -> str:
-    """The tracer's scene.json wording of a message, as a Blender user meets the same things."""
-    def no_object(m):
-        name = json.loads(m.group(1))
-        if name in bpy.data.objects:
-            obj = bpy.data.objects[name]
-            why = ("the camera (the eye itself), not an object the rays meet" if obj.type == "CAMERA"
-                   else "an object the render does not see: give it a HUD Optical Role (and leave it enabled in "
-                        "renders)")
-            return f"{name!r} is {why}"
-        return f"no object named {name!r}"
-    message = re.sub(r'no object named ("(?:[^"\\]|\\.)*")(?: \(or use "eye"\))?', no_object, message)
-    return message.replace("an LCD needs texture coordinates (an OBJ with vt lines)",
-                           "an LCD needs texture coordinates: add a UV map (Object Data Properties > UV Maps)")
-
-
-def blender_terms(error, folder: Path, scene) -> str:
-    """A tracer SceneError about an exported scene folder, in Blender's terms: the object, World or
-    camera and the property at fault instead of the temporary scene.json and its JSON path, with a hint
-    where a generated image lost its pixels."""
-    try:
-        data = json.loads((Path(folder) / "scene.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        data = {}
-    field, message = error.field, _EXPORT_FILE.sub("", error.message)
-    message = _POLARISATION_OFF.sub("set Render Properties > HUD Tracer > Polarisation to Auto (or change this)",
-                                    message)
-    m = re.match(r"objects\[(\d+)\](?:\.(\w+))?(?:\.(\w+))?", field)
-    hint = ""
-    if m and int(m.group(1)) < len(data.get("objects", [])):
-        entry = data["objects"][int(m.group(1))]
-        name, block, key = entry["name"], m.group(2), m.group(3)
-        original = bpy.data.objects.get(name.split(" @ ")[0])
-        where = f"object {name!r}"
-        if block == "material" and key:
-            schema = MATERIALS[entry["material"]["type"]].schema
-            f = next((f for f in schema.fields if f.name == key), None)
-            where += f": {f.title if f else 'HUD Optical Role' if key == 'type' else key}"
-            if f is not None and f.kind == "image" and original is not None:
-                hint = _image_hint(getattr(original.hud, key, None))
-        elif block == "emission":
-            where += f": emission{': ' + key if key else ''}"
-        elif block:
-            where += f": {block}"
-    elif field.startswith("environment.sun"):
-        suns = [o.name for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN" and not o.hide_render]
-        where = f"light {suns[0]!r}" if len(suns) == 1 else "the Sun light"
-        key = field[len("environment.sun"):].lstrip(".").split("[")[0]
-        where += ": " + _SUN_TERMS.get(key, "HUD Sun")
-    elif field.startswith("environment"):
-        world = scene.world
-        image = world.hud.image if world is not None else None
-        where = f"World {world.name!r}" if world is not None else "World"
-        key = field[len("environment"):].lstrip(".").split("[")[0]
-        if key in ("", "file") and image is not None:  # the panorama itself: its file or pixels
-            where += f": HDRI image {image.name!r}"
-            hint = _image_hint(image)
-        elif key in _ENVIRONMENT_TERMS:
-            where += f": HUD Environment > {_ENVIRONMENT_TERMS[key]}"
-    elif field.startswith("eye"):
-        where = f"camera {scene.camera.name!r}" if scene.camera is not None else "camera"
-        if field == "eye.fov_deg":
-            where += ": Lens and Sensor (the field of view they give)"
-        if field.startswith("eye.analyser"):
-            key = field[len("eye.analyser"):].lstrip(".")
-            f = next((f for f in ANALYSER.fields if f.name == key), None)
-            where += f": HUD Eye > {ANALYSER.title}" + (f" > {f.title}" if f is not None else "")
-    elif field == "polarisation":
-        where = "Render Properties > HUD Tracer > Polarisation"
-    elif field.startswith("methods."):
-        method, _, option = field[len("methods."):].partition(".")
-        where = f"Render Properties > HUD Tracer > {method.capitalize()} options"
-        fields = METHOD_OPTIONS[method].fields if method in METHOD_OPTIONS else ()
-        for key in filter(None, option.split(".")):  # the panel's labels, down nested groups (exit pupil)
-            f = next((f for f in fields if f.name == key.split("[")[0]), None)
-            where += f" > {f.label or key if f is not None else key}"
-            fields = f.fields if f is not None and f.fields else ()
-    else:
-        where = field or "scene"
-    return f"{where}: {_in_blender_words(message)}{hint}"
-
-
-def generated_image_warnings(scene) -> list[str]:
-    """Images the render uses whose pixels will not survive saving and opening the .blend again: generated
-    images that are neither packed nor saved, but were painted or filled (their pixels differ from what
-    Blender would regenerate)."""
-    images = []
-    if scene.world is not None and scene.world.hud.kind == "hdri" and scene.world.hud.image is not None:
-        images.append(("World: HDRI", scene.world.hud.image))
-    for obj in scene.objects:
-        if obj.hud.role != "none":
-            for f in MATERIALS[obj.hud.role].schema.fields:
-                img = getattr(obj.hud, f.name, None) if f.kind == "image" else None
-                if img is not None:
-                    images.append((f"object {obj.name!r}: {f.title}", img))
-    return [f"{what} image {img.name!r} is generated and not packed: its pixels are lost when the .blend is saved "
-            "and opened again; pack it (Image > Pack) or save it to a file"
-            for what, img in images if img.source == "GENERATED" and img.packed_file is None and img.is_dirty]

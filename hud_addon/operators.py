@@ -21,7 +21,8 @@ from ..tracer.scene import load_scene
 from ..tracer.transport.world import World
 from . import engine
 from .build import build_scene
-from .export import blender_terms, export_scene
+from .export import export_scene
+from .messages import blender_terms
 from .units import unit_mm
 
 #: The last eyebox sweep of each scene by name: its summary (tracer.scans.eyebox.EyeboxResult.summary), the

@@ -25,9 +25,10 @@ PRESETS = {m.NAME: m for m in (hud_direct, hud_screen, hud_screen_ideal, hud_dir
 #: single-method benchmarks (speed against accuracy, Mitsuba, fingerprints) leave them out: forward
 #: tracing and Mitsuba's converter do not render their environment channel as the hybrid does.
 STUDIES = tuple(m.NAME for m in (hud_screen_day, hud_screen_night, hud_direct_env))
-#: hud-direct's polarised variants (presets/hud_direct_polarised.py): tests/test_polarisation.py checks them;
-#: the speed-against-accuracy and Mitsuba benchmarks leave them out (Mitsuba's RGB variants cannot
-#: render polariser or analyser, and they are hud-direct for speed).
+#: hud-direct's polarised variants (presets/hud_direct_polarised.py), which
+#: tests/presets/test_hud_direct_polarised.py checks; the speed-against-accuracy and Mitsuba benchmarks
+#: leave them out (Mitsuba's RGB variants cannot render polariser or analyser, and they are hud-direct
+#: for speed).
 POLARISED = tuple(v.NAME for v in hud_direct_polarised.VARIANTS)
 #: Every preset but the studies and the polarised variants.
 SINGLE_METHOD = tuple(n for n in PRESETS if n not in STUDIES + POLARISED)

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support.paths import ROOT
+
 #: tracer/'s layers, lowest first (docs/dev/architecture.md). ``tracer`` itself (its __init__: the
 #: version) lies below them all; the command line above them all.
 LAYERS = ("core", "optics", "sources", "scene", "transport", "methods", "runtime", "analysis", "products", "scans",

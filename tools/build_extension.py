@@ -2,7 +2,7 @@
 
     python tools/build_extension.py [--output-dir dist] [--blender-ext PATH/TO/blender_ext.py]
 
-`make extension` and the add-on tests (tests/test_blender_addon.py) both build through this script, so
+`make extension` and the add-on tests (tests/addon/test_extension.py) both build through this script, so
 the tests check the zips that `make extension` makes. It runs tools/fetch_wheels.py (the pinned wheels
 into wheels/), then Blender's own extension tool, blender_ext.py (shipped inside the bpy package; by
 default the one of the bpy installed beside this Python):

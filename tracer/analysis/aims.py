@@ -27,7 +27,7 @@ def aim_warnings(analysis: dict) -> list[str]:
 #: The aims' coverage before the first ray (:func:`aim_preflight`): chains followed from at most this
 #: many evenly spaced pixels of the image, each from PREFLIGHT_PUPIL_GRID^2 points over the pupil and
 #: the pixel (0.6 s on analytic-disk, whose every chain ends in a quadrature of its emitter, 0.1 s on
-#: hud-direct; the presets' figures as the report's, the glass block of tests/test_analysis.py 84.0 %
+#: hud-direct; the presets' figures as the report's, the glass block of tests/analysis/test_aims.py 84.0 %
 #: against 85.5 %).
 PREFLIGHT_PIXELS = 64
 

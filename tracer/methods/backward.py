@@ -75,7 +75,7 @@ def solid_angle_pdf(pdf_area: np.ndarray, dist: np.ndarray, cos: np.ndarray) -> 
 
 #: When at least this share of a bounce's hits on glass split, only the others sample a branch;
 #: below it every hit samples and the split ones' entries are overwritten (fewer takes). The image is
-#: the same either way (tests/test_transport.py).
+#: the same either way (tests/transport/test_path.py).
 SAMPLE_UNSPLIT_ONLY = 0.5
 
 

@@ -22,7 +22,7 @@ method must be good at every level of the image, the typical pixel (on a HUD, mo
 background) as well as the brightest (the symbols, a focused spot): by the lit pixels' median
 alone, backward tracing with next-event estimation wins on a screen lit directly by a small LED and,
 beside that, through a lens that focuses it into a spot, which backward tracing reaches only by
-chance (tests/test_hybrid.py). The most efficient method renders the channel with the rest of the
+chance (tests/methods/test_pilots.py). The most efficient method renders the channel with the rest of the
 budget; the pilots are reported, not merged into the image. The variance of a pixel falls as 1 / N
 for every method here, so V x cost does not depend on the pilot's length.
 

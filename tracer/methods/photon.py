@@ -25,7 +25,7 @@ r_k^2 ~ k^(alpha - 1)). r_0 is ``radius_mm``, or where that is 0 (the default) `
 distance between the visibility points of neighbouring pixels (the pixel's footprint on the screen),
 measured once per render on the pilot's stream.
 
-What each part counts, so that no light path is counted twice (tests/test_photon.py proves it):
+What each part counts, so that no light path is counted twice (tests/methods/test_photon.py proves it):
 
 - ``hit``: emitters and the environment that eye paths meet along their specular chains;
 - ``connection``: light arriving at a visibility point straight from an emitter or the environment, by

@@ -3,7 +3,7 @@
 Adding a material: write a class here that derives from :class:`tracer.optics.bsdf.BSDF`, give it a
 ``schema`` (tracer.core.schema) and the interface methods, and decorate it with :func:`material`. The
 loader's validation, the Blender add-on's properties, panel and export, the preset builder and the
-Mitsuba converter's check all follow from the schema; tests/test_materials.py runs the chi-square
+Mitsuba converter's check all follow from the schema; tests/optics/test_materials.py runs the chi-square
 adapter on every non-delta material and the energy and reciprocity checks on all of them.
 
 Every routine works on a whole batch; the unit tests check energy conservation (and reciprocity

@@ -1,0 +1,199 @@
+"""Panels drawn from the schemas (hud_addon/schema_ui.py): the polarisation of scene.json in Blender, the eye's
+analyser, the scene's mode and the polarising materials drawn, exported, loaded by the tracer and built
+back.
+
+Each scenario (a ``scenario_*`` function: the scene set up, rendered or exported inside the bpy module)
+sits before the tests that assert on its result, and runs in a process of its own through
+tests/addon/blender_runner.py (tests.support.addon.in_blender)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from tests.support.addon import in_blender, needs_bpy
+
+pytestmark = [needs_bpy, pytest.mark.slow]
+
+
+class _PropLayout:
+    """Stands in for a panel's layout: records the names of the properties drawn."""
+
+    def __init__(self, names):
+        self.names = names
+
+    def prop(self, owner, name, **kw):
+        self.names.append(name)
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "grid_flow"):
+            return lambda *a, **k: _PropLayout(self.names)
+        return lambda *a, **k: None
+
+
+def scenario_polarisation(out):
+    """The polarisation of the scene in Blender: hud-direct with its LCD's output polariser on, a
+    retarder film, a coating given for s and p light, a metal mirror, polarised emission, the eye's
+    analyser (axis 90, along 0.9, across 0.01) and Polarisation "auto": panels drawn, exported to
+    out/pol; with Polarisation "off" the export is refused and an F12-style export names the Blender
+    settings; out/pol built back with Add HUD Preset's build_scene; the hud-direct-s-sunglasses preset
+    added when the tracer has it."""
+    import types
+
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    pkg = f"{module}.hud_addon"
+    export_mod, messages_mod, build_mod, ui_mod = (sys.modules[f"{pkg}.{m}"]
+                                                   for m in ("export", "messages", "build", "ui"))
+    out = Path(out)
+    bpy.ops.hud.add_preset(preset="hud-direct")
+    scene = bpy.context.scene
+    lcd = next(o for o in scene.objects if o.hud.role == "lcd")
+    lcd.hud.polariser_use, lcd.hud.polariser_axis_deg = True, 45.0
+    led = next(o for o in scene.objects if o.hud.emits)
+    led.hud.emission_polarisation_use = True
+    led.hud.emission_polarisation_axis_deg, led.hud.emission_polarisation_degree = 30.0, 0.5
+    extras = {}
+    for k, (name, role) in enumerate((("film", "retarder"), ("splitter", "coating"), ("metal", "mirror"))):
+        bpy.ops.mesh.primitive_plane_add(size=5.0, location=(1000.0 + 20.0 * k, 1000.0, 1000.0))
+        obj = extras[name] = bpy.context.object
+        obj.name, obj.hud.role = name, role
+    h = extras["film"].hud
+    h.transmittance, h.axis_deg, h.retardance_deg = (0.95, 0.95, 0.95), 22.5, 90.0
+    h = extras["splitter"].hud
+    h.by = "reflectance_s"
+    h.reflectance_s, h.reflectance_p = (0.3,) * 3, (0.1,) * 3
+    h.transmittance_s, h.transmittance_p = (0.6,) * 3, (0.8,) * 3
+    h = extras["metal"].hud
+    h.reflectance, h.metal_use, h.metal_complex_ior = (0.9, 0.9, 0.9), True, (1.2, 7.0)
+    eye = scene.camera.data.hud
+    eye.analyser_use = True
+    eye.analyser_axis_deg, eye.analyser_transmittance_along, eye.analyser_transmittance_across = 90.0, 0.9, 0.01
+    scene.hud.polarisation = "auto"
+    drawn = {}
+    for panel, ctx in (("eye", types.SimpleNamespace(camera=scene.camera.data, scene=scene)),
+                       ("render", types.SimpleNamespace(scene=scene)),
+                       *((name, types.SimpleNamespace(object=obj)) for name, obj in (("lcd", lcd), *extras.items()))):
+        names = drawn[panel] = []
+        cls = {"eye": ui_mod.HUD_PT_eye, "render": ui_mod.HUD_PT_render}.get(panel, ui_mod.HUD_PT_object)
+        cls.draw(types.SimpleNamespace(layout=_PropLayout(names)), ctx)
+    bpy.ops.hud.export_scene(directory=str(out / "pol"))
+    scene.hud.polarisation = "off"
+    try:
+        bpy.ops.hud.export_scene(directory=str(out / "off"))
+        refused = None
+    except RuntimeError as e:  # the operator's report
+        refused = str(e)
+    load_scene = sys.modules[f"{module}.tracer.scene"].load_scene
+    scene_error = sys.modules[f"{module}.tracer.core.errors"].SceneError
+    in_blender_terms = []  # what an F12 render says (the engine's export, then blender_terms)
+    for _ in range(2):
+        export_mod.export_scene(bpy.context.evaluated_depsgraph_get(), out / "off_unchecked")
+        try:
+            load_scene(out / "off_unchecked")
+            in_blender_terms.append(None)
+        except scene_error as e:
+            in_blender_terms.append(messages_mod.blender_terms(e, out / "off_unchecked", scene))
+        # The next element that needs polarisation, once these are off: the retarder film.
+        eye.analyser_use = lcd.hud.polariser_use = led.hud.emission_polarisation_use = False
+    lcd_name = lcd.name
+    for obj in extras.values():
+        bpy.data.objects.remove(obj)
+    scene.hud.polarisation = "off"  # build_scene sets it back
+    build_mod.build_scene(out / "pol", bpy.context)
+    cam = scene.camera.data.hud
+    by_name = {o.name: o for o in scene.objects}
+    built = {"polarisation": scene.hud.polarisation,
+             "analyser": [cam.analyser_use, cam.analyser_axis_deg, cam.analyser_transmittance_along,
+                          cam.analyser_transmittance_across],
+             "lcd": [by_name[lcd_name].hud.polariser_use, by_name[lcd_name].hud.polariser_axis_deg],
+             "film": [by_name["film"].hud.role, by_name["film"].hud.axis_deg, by_name["film"].hud.retardance_deg],
+             "splitter": [by_name["splitter"].hud.by, list(by_name["splitter"].hud.reflectance_p)],
+             "metal": [by_name["metal"].hud.metal_use, list(by_name["metal"].hud.metal_complex_ior)]}
+    presets = sys.modules[f"{module}.presets"].PRESETS
+    sunglasses = None
+    if "hud-direct-s-sunglasses" in presets:
+        folder = presets["hud-direct-s-sunglasses"].write(out / "sunglasses")
+        bpy.ops.hud.add_preset(preset="hud-direct-s-sunglasses")
+        cam = scene.camera.data.hud
+        raw = json.loads((Path(folder) / "scene.json").read_text())
+        sunglasses = {"analyser": raw["eye"].get("analyser"), "raw_polarisation": raw.get("polarisation", "auto"),
+                      "built": {"use": cam.analyser_use, "axis_deg": cam.analyser_axis_deg,
+                                "transmittance_along": cam.analyser_transmittance_along,
+                                "transmittance_across": cam.analyser_transmittance_across},
+                      "polarisation": scene.hud.polarisation}
+    items = [(i.identifier, i.description) for i in scene.hud.bl_rna.properties["polarisation"].enum_items]
+    disable(module)
+    return {"drawn": drawn, "refused": refused, "in_blender_terms": in_blender_terms, "built": built,
+            "sunglasses": sunglasses, "lcd": lcd_name, "items": items}
+
+
+def test_polarisation_in_blender_eye_analyser_mode_and_polarising_materials(tmp_path):
+    """The polarisation of scene.json in Blender: the eye's analyser (HUD Eye > Analyser, from
+    tracer.scene.ANALYSER) and the scene's Polarisation mode (HUD Tracer render settings) export as
+    eye.analyser and "polarisation"; the polarising materials come from their schemas by themselves (a
+    retarder role, the LCD's output polariser group, a coating given for s and p light, a metal mirror,
+    polarised emission): drawn, exported, loaded by the tracer and built back by Add HUD Preset. With
+    Polarisation Off the export is refused in Blender's terms."""
+    res, _ = in_blender(scenario_polarisation, tmp_path)
+    from tracer.scene import ANALYSER, POLARISATION_MODES, load_scene
+
+    # Panels: the analyser's toggle and fields, the mode, every new material field.
+    assert res["drawn"]["eye"][-4:] == ["analyser_use", "analyser_axis_deg_shown", "analyser_transmittance_along",
+                                        "analyser_transmittance_across"]
+    assert "polarisation" in res["drawn"]["render"]
+    assert {"polariser_use", "polariser_axis_deg_shown"} <= set(res["drawn"]["lcd"])
+    assert {"transmittance", "axis_deg_shown", "retardance_deg_shown"} <= set(res["drawn"]["film"])
+    assert {"by", "reflectance_s", "transmittance_p"} <= set(res["drawn"]["splitter"])
+    assert "reflectance" not in res["drawn"]["splitter"]  # the alternative not chosen is hidden
+    assert {"metal_use", "metal_complex_ior"} <= set(res["drawn"]["metal"])
+    assert [k for k, _ in res["items"]] == list(POLARISATION_MODES) and all(len(d) > 40 for _, d in res["items"])
+
+    data = json.loads((tmp_path / "pol" / "scene.json").read_text())
+    assert data["polarisation"] == "auto"
+    assert data["eye"]["analyser"] == {"axis_deg": pytest.approx(90.0), "transmittance_along": pytest.approx(0.9),
+                                       "transmittance_across": pytest.approx(0.01)}
+    assert set(data["eye"]["analyser"]) == {f.name for f in ANALYSER.fields}
+    objs = {o["name"]: o for o in data["objects"]}
+    assert objs[res["lcd"]]["material"]["polariser"] == {"axis_deg": pytest.approx(45.0)}
+    assert objs["film"]["material"] == {"type": "retarder", "transmittance": pytest.approx([0.95] * 3),
+                                        "axis_deg": pytest.approx(22.5), "retardance_deg": pytest.approx(90.0)}
+    splitter = objs["splitter"]["material"]
+    assert set(splitter) == {"type", "reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p"}
+    assert objs["metal"]["material"]["metal"] == {"complex_ior": pytest.approx([1.2, 7.0])}
+    polarised = [o["emission"]["polarisation"] for o in data["objects"] if "polarisation" in o.get("emission", {})]
+    assert polarised == [{"axis_deg": pytest.approx(30.0), "degree": pytest.approx(0.5)}]
+    sc = load_scene(tmp_path / "pol")
+    assert sc.polarisation == "auto" and sc.eye.analyser["transmittance_along"] == pytest.approx(0.9)
+    assert sc.object("film").material.type == "retarder"
+    assert sc.object(res["lcd"]).material.params["polariser"]["axis_deg"] == pytest.approx(45.0)
+
+    # Off: the export operator refuses (and leaves no folder); an F12 render says it in Blender's terms.
+    assert res["refused"] is not None and not (tmp_path / "off").exists()
+    analyser_msg, film_msg = res["in_blender_terms"]
+    for msg in (res["refused"], analyser_msg):
+        assert "camera 'Eye'" in msg and "Analyser" in msg and "Polarisation to Auto" in msg and "scene.json" not in msg
+    assert film_msg.startswith("object 'film': HUD Optical Role") and "Polarisation to Auto" in film_msg
+
+    # Add HUD Preset's builder: the exported folder back into Blender.
+    built = res["built"]
+    assert built["polarisation"] == "auto"
+    assert built["analyser"] == [True, pytest.approx(90.0), pytest.approx(0.9), pytest.approx(0.01)]
+    assert built["lcd"] == [True, pytest.approx(45.0)]
+    assert built["film"] == ["retarder", pytest.approx(22.5), pytest.approx(90.0)]
+    assert built["splitter"] == ["reflectance_s", pytest.approx([0.1] * 3)]
+    assert built["metal"] == [True, pytest.approx([1.2, 7.0])]
+    sunglasses = res["sunglasses"]
+    if sunglasses is not None:  # the tracer's preset of a HUD seen through polarised sunglasses
+        assert sunglasses["analyser"] is not None and sunglasses["built"]["use"] is True
+        for f in ANALYSER.fields:
+            expected = sunglasses["analyser"].get(f.name, f.default)
+            assert sunglasses["built"][f.name] == pytest.approx(expected, abs=1e-6), f.name
+        assert sunglasses["polarisation"] == sunglasses["raw_polarisation"]

@@ -1,0 +1,140 @@
+"""Rendering on worker processes (tracer/runtime/parallel.py): the same image on one and two processes, also
+when the tracer is a subpackage of made-up packages (as in Blender); workers that cannot start, a scene
+folder that changed, external files allowed, and more workers than the memory holds refused."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.support.cli import assert_one_line_error, hashes, run_cli
+from tests.support.paths import ROOT
+from tests.support.scenes import edit_json
+from tracer import cli
+
+
+def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_warned(mirror, earlier, monkeypatch):
+    """Each worker holds the tracer, the scene and its own film: --workers 1000 spawned a thousand
+    processes (about 130 MiB each) on a 24 GiB machine. Workers whose memory together passes half of
+    the machine's are refused in one line naming --workers, the estimate and how many fit, before any
+    process starts; workers beyond the CPUs render with a warning. Here on a machine of 1 GiB: 8
+    workers of analytic-mirror at 16 x 12 pixels (about 128 MiB each) need 1.0 GiB."""
+    import tracer.core.validate
+
+    out, before = earlier
+    monkeypatch.setattr(tracer.core.validate, "physical_memory_bytes", lambda: 1 << 30)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "--workers", "8 processes need about 1.0 GiB", "16 x 12", "at most 3 here")
+    assert hashes(out) == before
+    cpus = tracer.core.validate.available_cpus()
+    assert cli.check_workers(cpus, (16, 12)) is None
+    assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
+    # The library refuses them too, before its pilot and any worker process.
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    with pytest.raises(tracer.core.validate.WorkersError, match="at most 3 here"):
+        render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=10**12), workers=8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["forward", "backward"])
+def test_two_processes_give_the_same_image_as_one(preset, method):
+    """Seed-addressed batches merged in order: the same film on one and on two processes (to the
+    last bits of rounding)."""
+    from tests.support.render import films_match
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("hud-direct")
+    one = INTEGRATORS[method](load_scene(folder), 9).render(Budget(rays=2_500_000))
+    two = render_parallel(INTEGRATORS[method](load_scene(folder), 9), Budget(rays=2_500_000), workers=2)
+    assert one.batches == two.batches and one.rays == two.rays and one.found == two.found
+    assert films_match(one, two)
+
+
+@pytest.mark.slow
+def test_workers_start_when_the_tracer_is_a_subpackage_of_made_up_packages(preset, tmp_path):
+    """Inside Blender the tracer is bl_ext.<repository>.hud_tracer.tracer, under packages Blender makes
+    up at run time, which a plain interpreter cannot import. Here a copy of the tracer is imported the
+    same way (an empty package "hud_made_up" over a folder that links to this checkout): its workers
+    start, and the image equals the one-process render of the ordinary tracer. Its main module is
+    hidden from the workers (this test process's own would be pytest's)."""
+    import importlib
+    import types
+
+    from tests.support.render import films_match
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.scene import load_scene
+
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "hud_tracer").symlink_to(ROOT, target_is_directory=True)
+    made_up = types.ModuleType("hud_made_up")
+    made_up.__path__ = [str(repo)]
+    sys.modules["hud_made_up"] = made_up
+    try:
+        parallel = importlib.import_module("hud_made_up.hud_tracer.tracer.runtime.parallel")
+        integrators = importlib.import_module("hud_made_up.hud_tracer.tracer.methods")
+        scene_mod = importlib.import_module("hud_made_up.hud_tracer.tracer.scene")
+        assert parallel._made_up_packages() == [("hud_made_up", [str(repo)])]
+        folder = preset("analytic-mirror")
+        previews = []
+        two = parallel.render_parallel(integrators.INTEGRATORS["backward"](scene_mod.load_scene(folder), 5),
+                                       integrators.Budget(rays=800_000), workers=2,
+                                       preview=lambda film: previews.append(film.replicates))
+        assert type(two).__module__ == "hud_made_up.hud_tracer.tracer.methods.base"
+    finally:
+        for name in [n for n in sys.modules if n == "hud_made_up" or n.startswith("hud_made_up.")]:
+            del sys.modules[name]
+    one = INTEGRATORS["backward"](load_scene(folder), 5).render(Budget(rays=800_000))
+    assert one.batches == two.batches > 1 and films_match(one, two)
+    # The preview saw the film while it grew (at most once a second: at least the first merge).
+    assert previews and previews == sorted(previews) and previews[-1] < two.film.replicates
+
+
+def test_a_worker_that_cannot_start_stops_the_render_with_its_message(preset, tmp_path):
+    """A worker whose world cannot be built (its scene folder is gone) says why, and the render stops
+    with that message instead of waiting for workers that the pool would start again and again."""
+    import shutil
+    import time
+
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("analytic-mirror")
+    integrator = INTEGRATORS["backward"](load_scene(folder), 1)
+    shutil.rmtree(folder)
+    t0 = time.perf_counter()
+    with pytest.raises(RuntimeError, match="could not start: SceneError: .*scene.json: scene file not found"):
+        render_parallel(integrator, Budget(rays=100_000), workers=2)
+    assert time.perf_counter() - t0 < 60
+
+
+def test_workers_refuse_a_scene_folder_that_changed_since_the_render_began(preset):
+    """Workers load the scene from its folder: one edited after the render began (here in the parent's
+    memory, as a script might) would render another scene in them; the render stops and says so."""
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime.parallel import render_parallel
+    from tracer.scene import load_scene
+
+    folder = preset("analytic-mirror")
+    integrator = INTEGRATORS["backward"](load_scene(folder), 1)
+    edit_json(folder, lambda d: d["eye"].update(pupil_diameter_mm=3.0))
+    with pytest.raises(RuntimeError, match="another scene than the one the render began with"):
+        render_parallel(integrator, Budget(rays=100_000), workers=2)
+
+
+def test_external_files_are_allowed_in_the_workers_too(preset, tmp_path):
+    """--allow-external-files with two workers: the workers load the folder with the same rule."""
+    from tracer.cli import main
+
+    folder = preset("analytic-mirror")
+    outside = tmp_path / "meshes-outside"
+    (folder / "meshes").rename(outside)
+    edit_json(folder, lambda d: [o.update(mesh=str(outside / Path(o["mesh"]).name)) for o in d["objects"]])
+    assert main(["render", str(folder), "--rays", "200000", "--workers", "2", "--out", str(tmp_path / "o"),
+                 "--quiet", "--allow-external-files"]) == 0
