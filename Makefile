@@ -46,10 +46,10 @@ BLENDER_EXT = $(VENV)/lib/python3.11/site-packages/bpy/4.5/scripts/addons_core/b
 extension: $(TEST_STAMP)
 	$(PY) tools/build_extension.py --blender-ext $(BLENDER_EXT) --output-dir dist
 
-# The add-on tests (tests/addon/) on the oldest bpy the manifest allows (blender_version_min
-# 4.2.0): bpy 4.2.23, the latest 4.2 patch on PyPI, in its own .venv-bpy42 from requirements-bpy42.lock (the
-# pins of requirements.lock but bpy). Not part of `make test` or .ci/run: the venv takes a 350 MB download and
-# about 45 s, the 15 tests about 55 s on 2 cores.
+# The add-on tests (tests/addon/) on the oldest bpy the manifest allows (blender_version_min 4.2.0):
+# bpy 4.2.23, the latest 4.2 patch on PyPI, in its own .venv-bpy42 from requirements-bpy42.lock (the pins
+# of requirements.lock and requirements-test.lock but bpy). Not part of `make test` or .ci/run: the venv
+# takes a 350 MB download and about 45 s, the 37 add-on tests about 3 minutes on 2 cores.
 VENV42 := .venv-bpy42
 STAMP42 := $(VENV42)/.installed
 
