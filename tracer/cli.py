@@ -410,7 +410,9 @@ def cmd_sweep(args) -> int:
     from .methods import Budget
     from .products.outputs import OutputError
     from .runtime.allocator import keep_freed_memory
-    from .scans.sweep import SweepArgumentError, check_arguments, open_outputs, plan_sweep, run_sweep
+    from .scans.fields import SweepArgumentError
+    from .scans.plan import check_arguments, plan_sweep
+    from .scans.sweep import open_outputs, run_sweep
 
     try:
         check_render_args(args)

@@ -4,11 +4,8 @@ judged against one."""
 import pytest
 
 from tracer import cli
-from tracer.scans.sweep import (
-    MAX_RUNS,
-    SweepArgumentError,
-    parse_requirement,
-)
+from tracer.scans.fields import MAX_RUNS, SweepArgumentError
+from tracer.scans.requirements import parse_requirement
 
 
 def test_requirement_syntax():

@@ -22,12 +22,9 @@ from tests.support.stats import t_bound, z_bound
 from tracer import cli
 from tracer.core.imageio import read_image
 from tracer.products.charts import SHADE, THRESHOLD
-from tracer.scans.sweep import (
-    MAX_RUNS,
-    check_arguments,
-    plan_sweep,
-    read_csv,
-)
+from tracer.scans.fields import MAX_RUNS
+from tracer.scans.plan import check_arguments, plan_sweep
+from tracer.scans.results import read_csv
 
 L, R = analytic_mirror.L, analytic_mirror.R
 PANEL = "objects[panel].emission.luminance"
