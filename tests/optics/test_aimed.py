@@ -7,15 +7,12 @@ import numpy as np
 import pytest
 
 from tests.support.chi2 import SurfaceAdapter
+from tests.support.optics import CHI2_TESTS, material
 from tests.support.render import render
 from tests.support.scenes import lcd_edge_scene
 from tests.support.stats import z_bound
-from tracer.core.schema import parse_block
-from tracer.core.validate import FieldChecker
 from tracer.optics.aimed import Aimed, CosineEmission
 from tracer.optics.bsdf import IMPORTANCE
-from tracer.optics.materials import MATERIALS
-from tracer.scene import Material, SceneObject
 
 
 @pytest.mark.slow
@@ -27,22 +24,6 @@ def test_directed_split_is_unbiased(tmp_path, share):
     left = np.s_[:, :8]
     m, s = y[left].mean(), math.sqrt(var[left].sum()) / var[left].size
     assert abs(m - 500.0) < z_bound(3) * s
-
-
-#: Sidak family of the chi-square tests of the materials' samplers and the aimed mixture.
-CHI2_TESTS = 7
-
-
-def obj(mtype, slot=0, aim=None, **spec):
-    """A 2 x 2 mm square (normal +z) of material ``mtype`` whose fields are given as in scene.json."""
-    v = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    params = parse_block(FieldChecker("test"), spec, "material", MATERIALS[mtype].schema.fields)
-    return SceneObject("s", slot, v, f, Material(mtype, params, aim))
-
-
-def material(mtype, **spec):
-    return MATERIALS[mtype]([obj(mtype, **spec)])
 
 
 def test_chi2_aimed_mixture_at_a_surface_and_at_an_emitter():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.support.chi2 import SurfaceAdapter
-from tests.support.optics import incoming
+from tests.support.optics import CHI2_TESTS, incoming, material
 from tests.support.stats import z_bound
 from tracer.core.sampling import make_rng, uniform_sphere
 from tracer.core.schema import check_consistent, parse_block
@@ -16,21 +16,6 @@ from tracer.optics.fresnel import fresnel_unpolarized
 from tracer.optics.materials import MATERIALS
 from tracer.scene import Material, SceneObject
 from tracer.sources.lights import EMISSION
-
-#: Sidak family of the chi-square tests of the materials' samplers and the aimed mixture.
-CHI2_TESTS = 7
-
-
-def obj(mtype, slot=0, aim=None, **spec):
-    """A 2 x 2 mm square (normal +z) of material ``mtype`` whose fields are given as in scene.json."""
-    v = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    params = parse_block(FieldChecker("test"), spec, "material", MATERIALS[mtype].schema.fields)
-    return SceneObject("s", slot, v, f, Material(mtype, params, aim))
-
-
-def material(mtype, **spec):
-    return MATERIALS[mtype]([obj(mtype, **spec)])
 
 
 def hits(d):

@@ -103,15 +103,6 @@ def _check_luminance(y) -> np.ndarray:
     return y
 
 
-def _check_luminance(y) -> np.ndarray:
-    y = np.asarray(y, dtype=np.float64)
-    if y.ndim != 2 or y.size == 0:
-        raise ValueError(f"the luminance image must be a non-empty (H, W) array, got shape {y.shape}")
-    if not np.all(np.isfinite(y)):
-        raise ValueError("the luminance image holds non-finite values (NaN or Inf)")
-    return y
-
-
 def false_colour(y, lo: float | None = None, hi: float | None = None) -> tuple[np.ndarray, dict]:
     """The false-colour view of luminance ``y`` (H, W) cd/m^2, row 0 the top row.
 
