@@ -3,15 +3,15 @@ chains of :func:`tracer.transport.chains.specular_paths` on the analysis grid): 
 for every figure that speaks of symbols or background, the HUD figures (:mod:`.hud`) and the
 brightness-theorem comparison (:mod:`.brightness`) alike.
 
-- Where the dominant chain crosses an LCD (a direct HUD: the eye sees the LCD through the mirror and
-  the windshield), "symbol" is the pixels whose chain crosses a clear cell, as do the chains of their
-  four neighbouring pixels (an erosion by one pixel, whatever the grid's stride: strokes two pixels
-  wide keep their middle), so that stroke edges blurred by the pupil and the pixel are left out: the
-  stroke interiors a luminance meter aimed at a stroke reads, the ghost included where it overlaps
-  them. "background" is the pixels whose chain and
-  next chain through the LCD (the windshield's ghost) both cross black cells, so that the ghost's
-  symbols do not count as black leak, at least BACKGROUND_MARGIN_PX pixels from any other: the black
-  level away from the halo that the pupil spreads around every stroke.
+- Where the dominant chain crosses an LCD (a direct HUD: the eye sees the LCD through the mirror and the
+  windshield), "symbol" is the pixels whose chain crosses a clear cell, as do the chains of their four
+  neighbouring pixels (an erosion by one pixel, whatever the grid's stride: strokes two pixels wide keep
+  their middle), so that stroke edges blurred by the pupil and the pixel are left out: the stroke
+  interiors a luminance meter aimed at a stroke reads, the ghost included where it overlaps them.
+  "background" is the pixels whose chain and next chain through the LCD (the windshield's ghost) both
+  cross black cells, so that the ghost's symbols do not count as black leak, at least
+  BACKGROUND_MARGIN_PX pixels from any other: the black level away from the halo that the pupil spreads
+  around every stroke.
 - Otherwise (the eye sees a screen, a diffuser or an emitter: no LCD can be followed through a scattering
   surface), "image" is every pixel the brightest chain reaches, eroded by one grid cell.
 - "display" is where the dominant chain (through the LCD, else the brightest) reaches, eroded by one grid
@@ -55,10 +55,6 @@ class Sections:
     display: np.ndarray | None
     lcd: np.ndarray | None
     lcd_paths: list[dict]
-
-    @property
-    def grid(self) -> tuple[int, int]:
-        return self.chains["grid"]
 
     @property
     def stride(self) -> int:
