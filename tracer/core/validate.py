@@ -184,10 +184,6 @@ class FieldChecker:
         lo = None if limit is None else -limit
         return np.array([self.number(v, f"{fld}[{i}]", min_value=lo, max_value=limit) for i, v in enumerate(value)])
 
-    def position(self, value, fld: str) -> np.ndarray:
-        """A point in mm, within +-:data:`MAX_COORD_MM` of the origin along each axis."""
-        return self.vector(value, fld, 3, MAX_COORD_MM)
-
     def path(self, root, rel, fld: str) -> Path:
         """The file ``rel`` named by the scene, which must stay inside the scene folder ``root`` (relative,
         no "..", no link out of it) unless external files are allowed: a scene folder is self-contained

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from ..core.schema import Field, Schema
 from ..core.validate import (
-    MAX_ABS,
     MAX_COORD_MM,
     MAX_DISTANCE_MM,
     MAX_FOCAL_MM,
@@ -187,6 +186,3 @@ TOP = Schema("scene", "Scene", "The top level of scene.json", (
                       "of RGB renderers (a scene that needs polarisation is then refused)"),
     Field("backward", "group", None, description="The legacy place of methods.backward, read as it"),
     Field("forward", "group", None, description="The legacy place of methods.forward, read as it")))
-
-#: Every number without a range of its own lies within +-MAX_ABS.
-NUMBER_LIMIT = MAX_ABS
