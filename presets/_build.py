@@ -161,9 +161,10 @@ class SceneBuilder:
                      "environment": {"type": "none"}, "objects": []}
 
     def add(self, name: str, mesh, material: dict, transform: list | None = None, smooth: bool = False,
-            uv: np.ndarray | None = None, emission: dict | None = None):
-        """Add an object: its mesh (vertices, faces), material block, 4 x 4 transform, and the
-        emission block of an object that emits (tracer.sources.lights.EMISSION)."""
+            uv: np.ndarray | None = None, emission: dict | None = None, surfaces: list[dict] | None = None):
+        """Add an object: its mesh (vertices, faces), material block, 4 x 4 transform, the emission block
+        of an object that emits (tracer.sources.lights.EMISSION) and its exact surfaces
+        (tracer.scene.format.SURFACE blocks)."""
         vertices, faces = mesh[0], mesh[1]
         rel = f"meshes/{name}.obj"
         write_obj(self.folder / rel, np.asarray(vertices), np.asarray(faces), uv)
@@ -174,6 +175,8 @@ class SceneBuilder:
             obj["transform"] = {"matrix": transform}
         if smooth:
             obj["smooth_normals"] = True
+        if surfaces:
+            obj["surfaces"] = surfaces
         self.data["objects"].append(obj)
 
     def write(self, **blocks):

@@ -21,6 +21,7 @@ sys.path.insert(0, str(ROOT))
 
 from tracer.core.schema import REQUIRED, Field, Schema  # noqa: E402
 from tracer.optics.materials import MATERIALS  # noqa: E402
+from tracer.optics.shapes import SHAPES  # noqa: E402
 from tracer.scene import format as fmt  # noqa: E402
 from tracer.scene.methods import METHOD_OPTIONS  # noqa: E402
 from tracer.sources.lights import EMISSION  # noqa: E402
@@ -49,7 +50,7 @@ f 1 3 4
 KIND_TEXT = {"number": "number", "int": "integer", "rgb": "number or [r, g, b]", "pair": "number or [a, b]",
              "vector2": "[x, y]", "vector3": "[x, y, z]", "bool": "true or false", "string": "string",
              "object_ref": "object name", "image": "image file", "group": "block", "int2": "[w, h] integers",
-             "matrix4": "4 x 4 numbers", "list": "list of blocks"}
+             "matrix4": "4 x 4 numbers", "list": "list"}
 
 
 def _number(v) -> str:
@@ -166,6 +167,14 @@ def page() -> str:
     out += schema_section("##", "`objects[]`", fmt.OBJECT)
     out += ["### `transform`", "", "Either a matrix or parts (an absent transform is the identity).", ""]
     out += table(fmt.TRANSFORM_MATRIX.fields) + [""] + table(fmt.TRANSFORM_PARTS.fields) + [""]
+    out += schema_section("###", "`surfaces[]`", fmt.SURFACE,
+                          "The mesh stays what rays are intersected with; a hit on one of the surface's faces is "
+                          "moved onto the shape along the ray (float64 Newton steps) and takes the shape's exact "
+                          "normal, for every method and the optical analysis. A surface's frame is in the "
+                          "object's own coordinates and moves with its transform (any affine one). The shapes, "
+                          "by `type` (sags in mm, radii signed: positive with the centre of curvature on +z)")
+    for name, (schema, _) in SHAPES.items():
+        out += schema_section("####", f"`\"{name}\"`: {schema.label}", schema)
     out += schema_section("###", "`aim` and `light_aim`", fmt.AIM,
                           "`aim` of an emission or a scattering material steers the particles of forward tracing "
                           "and the photon pass; `light_aim` of a scattering material steers backward tracing's "

@@ -130,3 +130,24 @@ def mirror_behind_glass(preset):
     edit_json(folder, lambda d: d["objects"].append({"name": "glass", "mesh": "meshes/glass.obj",
                                                      "material": {"type": "dielectric", "ior": 1.5}}))
     return folder
+
+
+def mirror_cap(radius: float, half: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A square patch (2 ``half`` mm wide, n x n cells) of the sphere of ``radius`` mm whose vertex is
+    at the origin and whose centre is at (0, 0, radius): (vertices, faces), normals +z at the vertex."""
+    v, f, _ = rectangle(2 * half, 2 * half, n, n)
+    v[:, 2] = radius - np.sqrt(radius * radius - v[:, 0] ** 2 - v[:, 1] ** 2)
+    return v, f
+
+
+def sphere_mirror_scene(folder, radius: float = 500.0, half: float = 60.0, n: int = 12, surfaces=None,
+                        transform=None):
+    """A concave spherical mirror patch (:func:`mirror_cap`) with smooth normals seen from 300 mm on its
+    axis, with the exact ``surfaces`` given (default: its sphere)."""
+    sb = SceneBuilder(Path(folder), "sphere-mirror", "a concave spherical mirror patch")
+    if surfaces is None:
+        surfaces = [{"type": "sphere", "radius_mm": radius}]
+    sb.add("mirror", mirror_cap(radius, half, n), {"type": "mirror", "reflectance": 1.0}, transform, smooth=True,
+           surfaces=surfaces)
+    return sb.write(eye={"position": [0, 0, 300], "gaze": [0, 0, -1], "up": [0, 1, 0], "pupil_diameter_mm": 4,
+                         "resolution": [8, 8], "fov_deg": [10, 10]})

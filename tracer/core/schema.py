@@ -166,6 +166,8 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
         return _vector(ck, value, fld, f, 2, scalar_ok=True)
     if k == "vector2":
         return _vector(ck, value, fld, f, 2, scalar_ok=False)
+    if k == "vector3":
+        return _vector(ck, value, fld, f, 3, scalar_ok=False)
     if k == "bool":
         return ck.boolean(value, fld)
     if k == "choice":

@@ -4,7 +4,7 @@ exports it, presets write it, the tracer reads it. Its blocks and fields are :mo
 
 from .format import ANALYSER, LEGACY_EMITTER, MESH_SUFFIXES, POLARISATION_MODES, SCENE_FILE
 from .load import load_scene
-from .model import Aim, EyeSpec, Material, Scene, SceneObject
+from .model import Aim, EyeSpec, Material, Scene, SceneObject, Surface
 
 __all__ = ["ANALYSER", "LEGACY_EMITTER", "MESH_SUFFIXES", "POLARISATION_MODES", "SCENE_FILE", "Aim", "EyeSpec",
-           "Material", "Scene", "SceneObject", "load_scene"]
+           "Material", "Scene", "SceneObject", "Surface", "load_scene"]

@@ -22,6 +22,7 @@ from ..core.validate import (
     MIN_PUPIL_MM,
     MIN_SCALE,
 )
+from ..optics.shapes import SHAPES
 from ..sources.environment import CALIBRATION_MODES
 from ..sources.sun import SUN_ANGULAR_DIAMETER_DEG, SUN_ILLUMINANCE_LX, SUN_MAX_ANGULAR_DIAMETER_DEG
 
@@ -124,7 +125,24 @@ OBJECT = Schema("object", "Object", "A triangle mesh with a material, optionally
                                                   "identity"),
     Field("smooth_normals", "bool", False,
           description="Interpolate vertex normals for shading (a curved mirror's facets hidden)"),
-    Field("emission", "group", None, description="Makes the object a light (Emission below)")))
+    Field("emission", "group", None, description="Makes the object a light (Emission below)"),
+    Field("surfaces", "list", None,
+          description="Exact surfaces of an optic (Surfaces below): hits on the faces that lie on one are moved onto "
+                      "it and take its normal, so that the facets do not bend the rays")))
+
+#: One exact surface of an object (``objects[].surfaces[]``): a shape of tracer.optics.shapes on a frame
+#: given in the object's own coordinates (before its transform).
+SURFACE = Schema("surface", "Surface", "An analytic shape z = sag(x, y) on a frame of the object's own coordinates; "
+                 "the faces whose three corners lie on it within tolerance_mm are its own", (
+    Field("type", "choice", choices=tuple(SHAPES), description="The shape (below)"),
+    Field("origin", "vector3", [0.0, 0.0, 0.0], unit="mm", minimum=-MAX_COORD_MM, maximum=MAX_COORD_MM,
+          description="The shape's vertex, in the object's coordinates"),
+    Field("axis", "vector3", [0.0, 0.0, 1.0],
+          description="The shape's +z (the side its sag grows toward), in the object's coordinates"),
+    Field("x_axis", "vector3", [1.0, 0.0, 0.0],
+          description="The shape's +x (made perpendicular to axis; must not be parallel to it)"),
+    Field("tolerance_mm", "number", 0.01, unit="mm", minimum=1e-6, maximum=10.0,
+          description="How far a face's corners may lie from the shape for the face to be its own")))
 
 #: The sun of an environment: a uniform disk added to it.
 SUN = Schema("sun", "Sun", "A uniform disk of luminance E / (pi sin^2(diameter / 2)) added to the environment", (

@@ -49,6 +49,7 @@ from .format import (
 from .meshes import check_closed_outward, load_mesh
 from .methods import parse_methods
 from .model import Aim, EyeSpec, Material, Scene, SceneObject
+from .surfaces import load_surfaces
 
 #: The pupil's first guess when it follows the image and the environment is black: a lit interior, cd/m^2.
 FIRST_GUESS_CD_M2 = 100.0
@@ -363,6 +364,9 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         ly = m[:3, :3] @ np.array([0.0, 1.0, 0.0])
         ly -= (ly @ lx) * lx
         obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx, local_y=ly / np.linalg.norm(ly))
+        if o.get("surfaces") is not None:
+            obj.surfaces = load_surfaces(ck, o["surfaces"], f"{fld}.surfaces", name, mat.type,
+                                         emission is not None, vw, f, m, rel)
         if emission is not None:
             obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
             lum = obj.emission.luminance

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..core.validate import FieldChecker
 from ..optics.materials import MATERIALS
+from ..optics.shapes import Shape
 from ..sources.environment import Environment
 from ..sources.lights import Emission
 from .format import SCENE_FILE
@@ -43,6 +44,27 @@ class Material:
 
 
 @dataclass
+class Surface:
+    """An exact surface of an object (:data:`tracer.scene.format.SURFACE`): its shape on a frame, and the
+    faces of the object's mesh that lie on it.
+
+    type : the shape's name. shape : :class:`tracer.optics.shapes.Shape` (sag in the frame's units).
+    to_local : (4, 4) world mm -> the shape's frame (the inverse of the object's transform times the
+    frame; any affine map: the sag is taken in the frame's coordinates and normals follow by the inverse
+    transpose). faces : (k,) indices into the object's faces. gap_mm : (k,) the largest distance
+    between each of those faces and the shape (its corners' residuals and its facet's sagitta), mm.
+    params : the parsed fields, for the report.
+    """
+
+    type: str
+    shape: Shape
+    to_local: np.ndarray
+    faces: np.ndarray
+    gap_mm: np.ndarray
+    params: dict = field(default_factory=dict)
+
+
+@dataclass
 class SceneObject:
     """One object: a triangle mesh in world millimetres, its material and, if it emits, its emission.
 
@@ -69,6 +91,8 @@ class SceneObject:
     local_x: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     emission: Emission | None = None
     local_y: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    #: Exact surfaces of the object (:class:`Surface`); hits on their faces are refined onto them.
+    surfaces: list[Surface] = field(default_factory=list)
 
     def axis(self, angle_deg: float) -> np.ndarray:
         """(3,) unit vector at ``angle_deg`` from the local x axis toward the local y axis (the axis of a

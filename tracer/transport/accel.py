@@ -9,7 +9,8 @@ scene is re-centred on its bounding-box centre before it reaches Embree, every h
 refined in float64 against the triangle's plane, barycentric coordinates are recomputed in float64
 from the geometry (finer than Embree's and independent of its BVH, so a batch gives the same numbers
 in every process), and new rays start a scale-aware distance off the surface (:meth:`Accelerator.spawn`).
-Shadow rays use Embree's occlusion query (any hit, no closest-hit search).
+Shadow rays use Embree's occlusion query (any hit, no closest-hit search). Hits on faces that lie on an
+object's exact surface are refined onto it (:mod:`tracer.transport.surfaces`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
 from ..core.vec import F32, cross, dot, max3, norm, take
+from .surfaces import SurfaceTable
 
 #: Relative size of the spawn offset: eps = OFFSET_SCALE * (1 + |p - centre|_max), mm.
 OFFSET_SCALE = 2e-6
@@ -47,9 +49,11 @@ class Accelerator:
     face_slot : (F,) the object slot of every global face. first_face : {slot: first global face}.
     v0, e1, e2, normal : (3, F) planes of every triangle (corner, edges, unit geometric normal).
     rays_traced : int, every ray segment handed to Embree (closest-hit and shadow rays).
+    surfaces : the objects' exact surfaces (:class:`tracer.transport.surfaces.SurfaceTable`), or None
+    where no object has one or ``exact_surfaces`` is false (the meshes alone).
     """
 
-    def __init__(self, objects: list):
+    def __init__(self, objects: list, exact_surfaces: bool = True):
         if not objects:
             raise ValueError("an accelerator needs at least one mesh")
         allv = np.concatenate([o.vertices for o in objects])
@@ -92,6 +96,10 @@ class Accelerator:
         #: its corners relative to the scene's centre), so that float32 Embree resolves it.
         corner_extent = np.abs(tri - self.center).max(axis=(1, 2))
         self.offset = np.append(OFFSET_SCALE * (1.0 + corner_extent), 0.0)
+        self.surfaces = None
+        if exact_surfaces and any(o.surfaces for o in objects):
+            self.surfaces = SurfaceTable(objects, firsts, nfaces)
+            self.offset[:-1] += 2.0 * self.surfaces.gap  # rays leave the exact surface beyond the facets
         self.face_has_normals = np.concatenate(has_n)
         self.face_has_uv = np.concatenate(has_uv)
         # Vertex attributes are linear over a triangle: a(p) = M p + c for points p in its plane, with
@@ -143,7 +151,7 @@ class Accelerator:
         The distance is refined against the hit triangle's plane, t = (n . v0 - n . o) / (n . d), the
         numerator in float64, so the hit point o + t d lies on the plane to float64 precision whatever
         Embree's float32 t (off by ~1e-7 |t| and dependent on its BVH); where the ray grazes the plane,
-        Embree's own t stays."""
+        Embree's own t stays. On a face of an exact surface, the distance is the surface's."""
         n = o.shape[1]
         self.rays_traced += n
         if n == 0:
@@ -163,6 +171,8 @@ class Accelerator:
                 v = take(self.v0, f) - take(o, graze)
                 t[graze] = dot(v, take(d, graze).astype(np.float64))
             t[face < 0] = np.inf
+        if self.surfaces is not None:
+            t = self.surfaces.refine(o, d, face, t)
         return Hits(face, t)
 
     def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:

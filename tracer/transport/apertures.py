@@ -48,7 +48,7 @@ class MeshTarget:
         self._dist = Distribution1D(self.tris.area)
         faces = np.arange(3 * len(triangles)).reshape(-1, 3)
         mesh = SimpleNamespace(vertices=np.asarray(triangles).reshape(-1, 3), faces=faces, slot=0, normals=None,
-                               uv=None)
+                               uv=None, surfaces=[])
         self._accel = Accelerator([mesh])
 
     @property

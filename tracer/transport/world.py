@@ -37,12 +37,15 @@ class World:
     into ``materials`` of every global face. lights : LightTable. environment : the scene's environment.
     """
 
-    def __init__(self, scene: Scene, eye: ThinLensEye | None = None):
+    def __init__(self, scene: Scene, eye: ThinLensEye | None = None, exact_surfaces: bool = True):
         self.scene = scene
         self.eye = eye if eye is not None else ThinLensEye(scene.eye)
         self.environment = scene.environment
         traced = scene.traced_objects
-        self.accel = Accelerator(traced) if traced else None
+        #: Whether hits on the objects' exact surfaces are refined onto them (false: the meshes alone, to
+        #: measure what the facets cost).
+        self.exact_surfaces = exact_surfaces
+        self.accel = Accelerator(traced, exact_surfaces) if traced else None
         self.materials = make_materials(traced)
         slot_material = np.full(len(scene.objects), -1, np.int8)
         for i, m in enumerate(self.materials):
@@ -154,6 +157,11 @@ class World:
             ns, uv = ng, None
         else:
             ns, uv = a.shading(face, p, ng)
+        if a.surfaces is not None:  # faces on an exact surface: its normal, for shading and sides alike
+            exact = a.surfaces.normals(face, p, ng)
+            if exact is not ng:
+                ns = np.where(take(a.surfaces.face_surface, face) >= 0, exact, ns)
+                ng = exact
         return Interaction(d, p, ng, ns, uv, a.face_slot[face], take(a.offset, face))
 
     @property
