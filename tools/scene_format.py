@@ -130,7 +130,8 @@ def page() -> str:
         "illuminance in lx; colours are linear Rec.709 RGB, Y = 0.2126 R + 0.7152 G + 0.0722 B. Field names say "
         "their unit (`pupil_diameter_mm`, `fov_deg`).",
         "- World axes: z is up (as in Blender).",
-        "- Every object is a triangle mesh from a file: there are no built-in shapes.",
+        "- Every object is a triangle mesh from a file, except a windshield, which is made from its parameters "
+        "(`objects[].windshield` below).",
         "- A triangle's front side is the one from which its vertices run counter-clockwise (its normal is "
         "(v1 - v0) x (v2 - v0)). An emission leaves the front side only, unless `two_sided`; a dielectric's "
         "mesh must be closed with its normals pointing out of the glass (the loader counts the edges that are "
@@ -175,6 +176,17 @@ def page() -> str:
                           "by `type` (sags in mm, radii signed: positive with the centre of curvature on +z)")
     for name, (schema, _) in SHAPES.items():
         out += schema_section("####", f"`\"{name}\"`: {schema.label}", schema)
+    out += ["### `windshield`", "",
+            "In place of `mesh`, a dielectric object may be a windshield made from its parameters (the fields "
+            "`windshield.*` in the table above): a closed glass shell, meshed, with its inner and outer exact "
+            "surfaces. In the object's own frame the inner surface (the driver's side) passes through the origin "
+            "with its normal along +z, toward the driver; the glass lies behind it, x runs across the car and y up "
+            "the glass (the `transform` places it). Flat, or curved with radii in its x-z and y-z sections "
+            "(positive with the centre of curvature on the driver's side: a biconic; one radius 0 makes a "
+            "cylinder); of even thickness, or wedged: the outer surface turned by `wedge_mrad` so that the glass "
+            "thickens along `wedge_direction_deg`. A laminate is two objects: the glass at full thickness and, "
+            "inside it, the interlayer as a second windshield with its own `depth_mm`, thickness and `ior` "
+            "(`ior_outside` the glass's).", ""]
     out += schema_section("###", "`aim` and `light_aim`", fmt.AIM,
                           "`aim` of an emission or a scattering material steers the particles of forward tracing "
                           "and the photon pass; `light_aim` of a scattering material steers backward tracing's "
@@ -184,6 +196,10 @@ def page() -> str:
             f"`\"{fmt.LEGACY_EMITTER}\"` of earlier files is read as an absorber with an emission block.", ""]
     for name, cls in MATERIALS.items():
         out += schema_section("####", f"`{name}`: {cls.schema.label}", cls.schema, aims="`aim` and `light_aim` blocks")
+    out += schema_section("##", "`target`", fmt.TARGET,
+                          "The optical analysis (`hud-trace optics`) measures the image from the design eye point "
+                          "(the eye's position) and from a grid of eye points over the eyebox; docs/user/optics.md "
+                          "defines each metric")
     out += ["## `environment`", "", "What lies beyond the objects, by `type`; each may carry a `sun`.", ""]
     for name, schema in fmt.ENVIRONMENTS.items():
         out += schema_section("###", f"`\"{name}\"`: {schema.label}", schema)

@@ -168,6 +168,11 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
         return _vector(ck, value, fld, f, 2, scalar_ok=False)
     if k == "vector3":
         return _vector(ck, value, fld, f, 3, scalar_ok=False)
+    if k == "int2":
+        v = _vector(ck, value, fld, f, 2, scalar_ok=False)
+        if any(isinstance(x, bool) or float(x) != int(x) for x in value):
+            ck.fail(fld, f"expected two integers, got {json.dumps(value)[:40]}")
+        return (int(v[0]), int(v[1]))
     if k == "bool":
         return ck.boolean(value, fld)
     if k == "choice":

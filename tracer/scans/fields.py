@@ -20,6 +20,7 @@ from fnmatch import fnmatchcase
 
 import numpy as np
 
+from ..core.jsonpath import parse_field, path_text
 from ..optics.materials import MATERIALS
 from ..scene.format import AIM, ANALYSER, CALIBRATION, ENVIRONMENTS, EYE, SUN, TRANSFORM_PARTS
 from ..scene.methods import METHOD_OPTIONS
@@ -45,75 +46,8 @@ class SweepArgumentError(ValueError):
 
 
 # -- paths into JSON ----------------------------------------------------------------------------------
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-
-
 #: Marks a block or field that the scene does not hold yet.
 MISSING = object()
-
-
-def parse_field(text: str, globs: bool = True) -> tuple[tuple[str, object], ...]:
-    """The steps of a dotted path: ("key", name), ("index", i) or, after a top-level ``objects`` when
-    ``globs``, ("glob", pattern). Raises ValueError saying what is malformed."""
-    steps: list[tuple[str, object]] = []
-    i, n = 0, len(text)
-    if not text:
-        raise ValueError("empty path")
-    while True:
-        m = _NAME.match(text, i)
-        if not m:
-            raise ValueError(f"expected a field name at character {i + 1}")
-        steps.append(("key", m.group()))
-        i = m.end()
-        while i < n and text[i] == "[":
-            depth, j = 0, i
-            while j < n:
-                depth += {"[": 1, "]": -1}.get(text[j], 0)
-                if depth == 0:
-                    break
-                j += 1
-            if j >= n:
-                raise ValueError(f"the '[' at character {i + 1} is not closed")
-            sel = text[i + 1:j]
-            if re.fullmatch(r"\d+", sel):
-                steps.append(("index", int(sel)))
-            elif globs and steps == [("key", "objects")] and sel:
-                steps.append(("glob", sel))
-            else:
-                where = "an object's name (a glob) or an index" if globs and steps == [("key", "objects")] else \
-                    "an index (only objects[...] takes a name)"
-                raise ValueError(f"[{sel}] at character {i + 1}: expected {where}")
-            i = j + 1
-        if i == n:
-            return tuple(steps)
-        if text[i] != ".":
-            raise ValueError(f"unexpected {text[i]!r} at character {i + 1}")
-        i += 1
-
-
-def path_text(path: tuple) -> str:
-    """A concrete path as the loader's messages write it: ``objects[10].emission.luminance``."""
-    out = ""
-    for step in path:
-        out += f"[{step}]" if isinstance(step, int) else (f".{step}" if out else step)
-    return out
-
-
-def lookup(data, steps) -> tuple[object, str | None]:
-    """(value, None) at ``steps`` (from :func:`parse_field` without globs) in ``data``, or (None, why)."""
-    node, done = data, ()
-    for kind, arg in steps:
-        here = path_text(done) or "the report"
-        if kind == "key":
-            if not isinstance(node, dict):
-                return None, f"{here} is not a block"
-            if arg not in node:
-                return None, f"{here} has no field {arg!r}"
-        else:
-            if not isinstance(node, list) or not 0 <= arg < len(node):
-                return None, f"{here} has no element [{arg}]"
-        node, done = node[arg], (*done, arg)
-    return node, None
 
 
 # -- fields and their grid ----------------------------------------------------------------------------

@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import __version__
+from ..core.jsonpath import lookup, parse_field, path_text
 from ..products import charts
 from ..products.report import report_unit
-from .fields import SweepField, field_unit, lookup, parse_field, path_text
+from .fields import SweepField, field_unit
 from .plan import MAX_PANELS, SweepPlan
 from .requirements import run_figures
 

@@ -25,6 +25,7 @@ from ..core.validate import (
 from ..optics.shapes import SHAPES
 from ..sources.environment import CALIBRATION_MODES
 from ..sources.sun import SUN_ANGULAR_DIAMETER_DEG, SUN_ILLUMINANCE_LX, SUN_MAX_ANGULAR_DIAMETER_DEG
+from .windshield import WINDSHIELD
 
 FORMAT = "hud-scene"
 VERSION = 1
@@ -117,9 +118,10 @@ TRANSFORM_PARTS = Schema("transform (parts)", "Transform", "Scale, then rotate, 
 #: One object of ``objects``.
 OBJECT = Schema("object", "Object", "A triangle mesh with a material, optionally emitting", (
     Field("name", "string", description='Unique in the scene; "eye" is reserved'),
-    Field("mesh", "string", description="A mesh file inside the scene folder (" + ", ".join(MESH_SUFFIXES)
-                                        + "), in mm; an LCD's mesh needs texture coordinates (an OBJ with vt "
-                                        "lines)"),
+    Field("mesh", "string", None, description="A mesh file inside the scene folder (" + ", ".join(MESH_SUFFIXES)
+                                              + "), in mm; an LCD's mesh needs texture coordinates (an OBJ with vt "
+                                              "lines). Give a mesh or a windshield"),
+    WINDSHIELD,
     Field("material", "group", description='"type" and that material\'s fields (Materials below)'),
     Field("transform", "group", None, description="Object to world: a matrix or parts (below); absent: the "
                                                   "identity"),
@@ -128,7 +130,7 @@ OBJECT = Schema("object", "Object", "A triangle mesh with a material, optionally
     Field("emission", "group", None, description="Makes the object a light (Emission below)"),
     Field("surfaces", "list", None,
           description="Exact surfaces of an optic (Surfaces below): hits on the faces that lie on one are moved onto "
-                      "it and take its normal, so that the facets do not bend the rays")))
+                      "it and take its normal, so that the facets do not bend the rays (a windshield has its own)")))
 
 #: One exact surface of an object (``objects[].surfaces[]``): a shape of tracer.optics.shapes on a frame
 #: given in the object's own coordinates (before its transform).
@@ -186,6 +188,37 @@ ENVIRONMENTS = {
         Field("sun", "group", None, description="A sun (below)"))),
 }
 
+#: The target image of the optical analysis (tracer.analysis.optics): the virtual image as specified.
+TARGET = Schema("target", "Target image", "The virtual image as specified, which the optical analysis (hud-trace "
+                "optics) reports every metric against; every field is optional", (
+    Field("distance_mm", "number", None, unit="mm", minimum=10.0, maximum=MAX_DISTANCE_MM,
+          description="Target image distance (TID) from the design eye point; absent: the measured virtual image "
+                      "distance of the PGU's centre"),
+    Field("look_down_deg", "number", None, unit="deg", minimum=-90.0, maximum=90.0,
+          description="The image centre below the horizontal through the design eye point; absent: measured"),
+    Field("look_over_deg", "number", None, unit="deg", minimum=-90.0, maximum=90.0,
+          description="The image centre to the right of the forward direction; absent: measured"),
+    Field("fov_deg", "vector2", None, unit="deg", minimum=0.0, exclusive_min=True, maximum=MAX_FOV_DEG,
+          description="Field of view [horizontal, vertical]; absent: measured (and no PGU usage)"),
+    Field("eyebox_mm", "vector2", [130.0, 50.0], unit="mm", minimum=0.0, maximum=1000.0,
+          description="Eyebox [width, height], centred on the design eye point (the eye's position), across the "
+                      "forward direction"),
+    Field("ipd_mm", "number", 65.0, unit="mm", minimum=0.0, exclusive_min=True, maximum=200.0,
+          description="Interpupillary distance of the binocular pairs"),
+    Field("forward", "vector3", None, description="The vehicle's forward direction; absent: the eye's gaze made "
+                                                  "horizontal"),
+    Field("up", "vector3", [0.0, 0.0, 1.0], description="The vehicle's up (the world's z)"),
+    Field("field_grid", "int2", [5, 3], minimum=2, maximum=41,
+          description="PGU field points [across, up] over its active area, edges included (across: the PGU "
+                      "direction that the image shows horizontally)"),
+    Field("eye_grid", "int2", [9, 5], minimum=1, maximum=41,
+          description="Eye points [across, up] over the eyebox, edges included"),
+    Field("pgu", "string", None, description="The object the image forms on; absent: the first LCD of the "
+                                             "brightest specular chain from the eye, else the surface it ends on"),
+    Field("requirements", "list", None,
+          description='"KEY OP VALUE" against optics.json\'s summary (design_eye.ghost_separation_arcmin < 1), as '
+                      "the sweep's --require; judged in optics.json")))
+
 #: The top level of scene.json.
 TOP = Schema("scene", "Scene", "The top level of scene.json", (
     Field("format", "string", description=f'"{FORMAT}"'),
@@ -198,6 +231,7 @@ TOP = Schema("scene", "Scene", "The top level of scene.json", (
                                                     '{"type": "none"}'),
     Field("methods", "group", None, description="Options of each light-transport method by its name (Methods "
                                                 "below)"),
+    Field("target", "group", None, description="The target image of the optical analysis (Target below)"),
     Field("polarisation", "choice", "auto", choices=POLARISATION_MODES,
           description='"auto": Stokes vectors wherever an element polarises (a dielectric, a metal, an s/p coating, '
                       'an LCD polariser, a polarised source, an analyser); "off": the unpolarised Fresnel average '

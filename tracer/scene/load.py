@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import SceneError
+from ..core.jsonpath import parse_requirement
 from ..core.schema import fail_in, number_field, parse_block
 from ..core.validate import (
     BYTES_PER_PIXEL,
@@ -41,6 +42,7 @@ from .format import (
     OBJECT,
     POLARISATION_MODES,
     SCENE_FILE,
+    TARGET,
     TOP,
     TRANSFORM_MATRIX,
     TRANSFORM_PARTS,
@@ -50,6 +52,7 @@ from .meshes import check_closed_outward, load_mesh
 from .methods import parse_methods
 from .model import Aim, EyeSpec, Material, Scene, SceneObject
 from .surfaces import load_surfaces
+from .windshield import WINDSHIELD, windshield_mesh
 
 #: The pupil's first guess when it follows the image and the environment is black: a lit interior, cd/m^2.
 FIRST_GUESS_CD_M2 = 100.0
@@ -267,6 +270,53 @@ def _eye(ck: FieldChecker, spec, environment: Environment) -> EyeSpec:
                    from_image, age, analyser)
 
 
+def _windshield(ck: FieldChecker, o: dict, fld: str, mat: Material):
+    """(vertices, faces, None, surfaces blocks) of an object's windshield block (tracer.scene.windshield)."""
+    where = f"{fld}.windshield"
+    if mat.type != "dielectric":
+        ck.fail(f"{fld}.material.type", f'a windshield is glass: "dielectric", got {json.dumps(mat.type)}')
+    if o.get("surfaces") is not None:
+        ck.fail(f"{fld}.surfaces", "a windshield brings its own surfaces")
+    p = parse_block(ck, o["windshield"], where, WINDSHIELD.fields)
+    for key in ("radius_x_mm", "radius_y_mm"):
+        least = 0.5 * max(p["size_mm"])
+        if 0 < abs(p[key]) < least:
+            ck.fail(f"{where}.{key}", f"|radius| must be 0 (flat) or at least half the size ({least:g} mm), got "
+                                      f"{p[key]:g}")
+    try:
+        v, f, specs = windshield_mesh(p)
+    except ValueError as e:
+        ck.fail(where, str(e))
+    return v, f, None, specs
+
+
+def _target(ck: FieldChecker, spec) -> dict:
+    """The target block (:data:`TARGET`; absent: every default): the parsed fields, ``forward`` and
+    ``up`` normalised (None for an absent forward), ``requirements`` as
+    :class:`tracer.core.jsonpath.Requirement` objects."""
+    spec = {} if spec is None else spec
+    listed = {f.name for f in TARGET.fields if f.kind == "list"}
+    out = parse_block(ck, spec, "target", tuple(f for f in TARGET.fields if f.name not in listed), extra_keys=listed)
+    for key in ("forward", "up"):
+        if key in out:
+            n = float(np.linalg.norm(out[key]))
+            if n < 1e-12:
+                ck.fail(f"target.{key}", "must not be the zero vector")
+            out[key] = out[key] / n
+    if "forward" in out and abs(float(out["forward"] @ out["up"])) > 0.999:
+        ck.fail("target.forward", "must not be parallel to target.up")
+    reqs = spec.get("requirements", [])
+    if not isinstance(reqs, list):
+        ck.fail("target.requirements", 'expected a list of "KEY OP VALUE" strings')
+    out["requirements"] = []
+    for i, text in enumerate(reqs):
+        try:
+            out["requirements"].append(parse_requirement(text))
+        except ValueError as e:
+            ck.fail(f"target.requirements[{i}]", str(e))
+    return out
+
+
 def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     """Read and validate a scene folder (or a scene.json path).
 
@@ -328,10 +378,17 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
                 ck.fail(f"{fld}.emission", f"material {mat.type} is not traced (rays pass through it), so it cannot "
                                            "emit: give the emission to a surface (an absorber for a bare source)")
         files += [v for k, v in mat.params.items() if k.endswith("_file")]
-        rel = ck.string(o["mesh"], f"{fld}.mesh")
-        files.append(rel)
         m = _transform(ck, o["transform"], f"{fld}.transform") if "transform" in o else np.eye(4)
-        v, f, uv = load_mesh(ck, root, rel, f"{fld}.mesh")
+        if ("mesh" in o) == (o.get("windshield") is not None):
+            ck.fail(fld, 'give exactly one of "mesh" or "windshield"')
+        surfaces_spec = o.get("surfaces")
+        if "mesh" in o:
+            rel = ck.string(o["mesh"], f"{fld}.mesh")
+            files.append(rel)
+            v, f, uv = load_mesh(ck, root, rel, f"{fld}.mesh")
+        else:
+            rel = f"{fld}.windshield"
+            v, f, uv, surfaces_spec = _windshield(ck, o, fld, mat)
         if f.min() < 0 or f.max() >= len(v):
             ck.fail(f"{fld}.mesh", f"{rel}: face indices out of range")
         if np.abs(v).max() > MAX_COORD_MM:
@@ -364,9 +421,9 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
         ly = m[:3, :3] @ np.array([0.0, 1.0, 0.0])
         ly -= (ly @ lx) * lx
         obj = SceneObject(name, i, vw, f, mat, smooth, normals, uv, lx, local_y=ly / np.linalg.norm(ly))
-        if o.get("surfaces") is not None:
-            obj.surfaces = load_surfaces(ck, o["surfaces"], f"{fld}.surfaces", name, mat.type,
-                                         emission is not None, vw, f, m, rel)
+        if surfaces_spec is not None:
+            where = f"{fld}.surfaces" if "mesh" in o else f"{fld}.windshield"
+            obj.surfaces = load_surfaces(ck, surfaces_spec, where, name, mat.type, emission is not None, vw, f, m, rel)
         if emission is not None:
             obj.emission = make_emission(emission, obj.area_mm2, emission_aim)
             lum = obj.emission.luminance
@@ -400,6 +457,9 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             ck.fail(fld, f"aim target {json.dumps(target)} must be a planar mesh (a window, a lens aperture, the LCD)")
 
     polarisation = _polarisation(ck, raw, eye, objects)
+    target = _target(ck, raw.get("target"))
+    if target.get("pgu") is not None and target["pgu"] not in by_name:
+        ck.fail("target.pgu", f"no object named {json.dumps(target['pgu'])}")
 
     name = raw.get("name", root.name)
     if not isinstance(name, str):
@@ -411,6 +471,6 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
     if isinstance(env_file, str):
         files.append(env_file)
     scene = Scene(root, name, desc, eye, env, objects, {}, scene_hash(root, raw_bytes, files), raw, fname,
-                  allow_external, polarisation)
+                  allow_external, polarisation, target)
     scene.methods = parse_methods(ck, raw, scene)
     return scene

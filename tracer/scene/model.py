@@ -158,6 +158,9 @@ class Scene:
     allow_external: bool = False
     #: :data:`POLARISATION_MODES`: "auto" (Stokes vectors where the scene polarises) or "off".
     polarisation: str = "auto"
+    #: The target image of the optical analysis (tracer.scene.format.TARGET's parsed fields, defaults
+    #: filled in; absent optional fields left out).
+    target: dict = field(default_factory=dict)
 
     def object(self, name: str) -> SceneObject:
         for obj in self.objects:

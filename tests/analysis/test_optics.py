@@ -1,0 +1,161 @@
+"""The optical analysis (tracer/analysis/optics.py) against the closed forms of
+../shared/reference/hud-optical-metrics.md: plane mirror, spherical mirror on and off its axis
+(Coddington), flat plate ghost, wedge deviation and binocular vergence, each within 1 % or 0.01 mrad."""
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.support import imaging
+from tracer.analysis.optics import Analysis, OpticsError
+from tracer.scene import load_scene
+from tracer.transport.world import World
+
+MRAD_PER_ARCMIN = math.pi / (180 * 60) * 1e3
+
+
+def _analyse(folder, **kw):
+    analysis = Analysis(World(load_scene(folder)))
+    return analysis, analysis.run(**kw)
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory):
+    return _analyse(imaging.plane_mirror(tmp_path_factory.mktemp("plane")))
+
+
+def test_plane_mirror_images_the_panel_where_it_is(plane):
+    """VID = eye-to-mirror + mirror-to-panel; no astigmatism and no distortion."""
+    analysis, out = plane
+    s = out["summary"]["design_eye"]
+    assert analysis.chains.primary.text == "mirror:reflect > panel"
+    assert s["vid_mm"] == pytest.approx(1000.0, rel=1e-3)
+    assert s["vid_tangential_mm"] == pytest.approx(1000.0, rel=1e-3)
+    assert s["vid_sagittal_mm"] == pytest.approx(1000.0, rel=1e-3)
+    assert s["astigmatism_d"] < 1e-4
+    assert s["static_distortion_mrad"] < 0.01
+    # the panel's 60 x 30 mm at 1 m, magnification 1
+    assert s["fov_h_deg"] == pytest.approx(math.degrees(2 * math.atan(30 / 1000)), rel=1e-3)
+    assert s["magnification_h"] == pytest.approx(1.0, rel=1e-3)
+    assert s["magnification_v"] == pytest.approx(1.0, rel=1e-3)
+    assert s["look_down_deg"] == pytest.approx(0.0, abs=1e-4)
+
+
+def test_plane_mirror_has_no_dynamic_distortion_and_no_disparity(plane):
+    """A real image: from every eye point of the eyebox the image sits where it is, the two eyes'
+    lines of sight meet (dipvergence 0) at the target distance (= VID: convergence 0)."""
+    _, out = plane
+    box = out["summary"]["eyebox"]
+    assert box["eye_points_seeing_every_field_point"] == "45/45"
+    assert box["binocular_pairs"] == 25
+    assert box["dynamic_distortion_mrad"] < 0.01
+    assert box["dipvergence_mrad"] < 0.01
+    assert box["convergence_mrad"] < 0.01 and box["divergence_mrad"] < 0.01
+
+
+def test_vergence_angle_is_ipd_over_distance(plane):
+    """The pair at the design eye point, the image's centre straight ahead 1 m away: 2 atan(IPD / 2D),
+    IPD / D to first order (65 mrad)."""
+    _, out = plane
+    centre = [p for p in out["pairs"] if p["midpoint_mm"] == [0.0, 0.0]]
+    assert len(centre) == 1
+    angle = centre[0]["vergence_angle_mrad"][7]  # the middle of the 5 x 3 field points
+    assert angle == pytest.approx(2 * math.atan(32.5 / 1000) * 1e3, abs=0.01)
+    assert angle == pytest.approx(65.0, rel=0.01)
+
+
+def test_spherical_mirror_on_axis(tmp_path):
+    """s_i = s_o f / (f - s_o) behind the mirror, magnification s_i / s_o (R 1000, s_o 350)."""
+    analysis, out = _analyse(imaging.sphere_on_axis(tmp_path / "s"), eyebox=False)
+    s = out["summary"]["design_eye"]
+    assert analysis.chains.primary.text == "splitter:transmit > mirror:reflect > splitter:reflect > panel"
+    f, so = 500.0, 350.0
+    si = so * f / (f - so)
+    assert s["vid_mm"] == pytest.approx(400.0 + si, rel=0.01)
+    assert s["magnification_h"] == pytest.approx(si / so, rel=0.01)
+    assert s["magnification_v"] == pytest.approx(si / so, rel=0.01)
+    assert s["astigmatism_centre_d"] < 1e-3
+
+
+def test_spherical_mirror_off_axis_coddington(tmp_path):
+    """Met at 15 deg: f_t = (R/2) cos(theta) images the vertical section, f_s = (R/2) / cos(theta) the
+    horizontal; astigmatism |1/(d + s_t) - 1/(d + s_s)|."""
+    _, out = _analyse(imaging.sphere_off_axis(tmp_path / "s"), eyebox=False)
+    s = out["summary"]["design_eye"]
+    th, so, d = math.radians(15.0), 300.0, 600.0
+    ft, fs = 500.0 * math.cos(th), 500.0 / math.cos(th)
+    vt, vs = d + so * ft / (ft - so), d + so * fs / (fs - so)
+    assert s["vid_tangential_mm"] == pytest.approx(vt, rel=0.01)
+    assert s["vid_sagittal_mm"] == pytest.approx(vs, rel=0.01)
+    assert s["astigmatism_centre_d"] == pytest.approx(abs(1 / vt - 1 / vs) * 1e3, rel=0.01)
+
+
+def test_the_meshed_sphere_errs_where_the_exact_one_does_not(tmp_path):
+    """The same mirror as 6 x 6 facets with interpolated normals and no exact surface: across the field
+    its tangential images move by over ten times the exact surface's error against Coddington."""
+    _, exact = _analyse(imaging.sphere_off_axis(tmp_path / "e"), eyebox=False)
+    _, meshed = _analyse(imaging.sphere_off_axis(tmp_path / "m", exact=False, cells=6), eyebox=False)
+    th, so, d = math.radians(15.0), 300.0, 600.0
+    ft = 500.0 * math.cos(th)
+    exact_error = abs(exact["summary"]["design_eye"]["vid_tangential_mm"] - (d + so * ft / (ft - so)))
+    vid = lambda out: np.array([p["vid_tangential_mm"] for p in out["field_points"]])  # noqa: E731
+    assert np.abs(vid(meshed) - vid(exact)).max() > 10 * exact_error
+
+
+def test_flat_plate_ghost_separation(tmp_path):
+    """The second surface's image is offset by d = 2 t tan(theta') cos(theta): d / VID apart."""
+    analysis, out = _analyse(imaging.plate(tmp_path / "p"), eyebox=False)
+    s = out["summary"]["design_eye"]
+    assert analysis.chains.primary.text == "plate:reflect > panel"
+    assert analysis.chains.ghost.text == "plate:refract > plate:reflect > plate:refract > panel"
+    expected = imaging.plate_offset(4.76, 1.52, 65.0) / 2500.0 * 1e3
+    assert s["ghost_separation_centre_arcmin"] * MRAD_PER_ARCMIN == pytest.approx(expected, rel=0.01)
+    # the ghost ratio: R of the second surface through two transmissions over R of the first
+    assert 0.5 < s["ghost_ratio"] < 1.0
+
+
+@pytest.mark.parametrize("wedge_mrad", [0.2, -0.3])
+def test_wedge_deviates_the_ghost(tmp_path, wedge_mrad):
+    """A ray met by the flat plate and by the wedge at the same point and direction: their ghost
+    reflections leave 2 n delta cos(theta') / cos(theta) apart, and the primary reflections do not
+    differ. Seen from the eye (a from the glass) at a point VID away, the ghost moves by that deviation
+    times (VID - a) / VID."""
+    runs = {}
+    for w in (0.0, wedge_mrad):
+        runs[w] = _analyse(imaging.plate(tmp_path / f"w{w}", wedge_mrad=w), eyebox=False)
+    flat, wedge = runs[0.0][0], runs[wedge_mrad][0]
+    eye = np.zeros((3, 1))
+    d = np.array([[0.0], [1.0], [0.0]])
+    out = {}
+    for name, a in (("flat", flat), ("wedge", wedge)):
+        out[name] = (a.primary.land(eye, d).direction[:, 0], a.ghost.land(eye, d).direction[:, 0])
+    expected = imaging.wedge_deviation(abs(wedge_mrad), 1.52, 65.0)
+    turn = math.acos(np.clip(out["flat"][1] @ out["wedge"][1], -1, 1))
+    assert turn == pytest.approx(expected, rel=0.01)
+    assert math.acos(np.clip(out["flat"][0] @ out["wedge"][0], -1, 1)) < 1e-9
+    # from the eye: the vertical offset changes by the deviation times (VID - a) / VID, its sign with the wedge's
+    s0, s1 = (r[1]["summary"]["design_eye"] for r in (runs[0.0], runs[wedge_mrad]))
+    change = (s1["ghost_offset_v_arcmin"] - s0["ghost_offset_v_arcmin"]) * MRAD_PER_ARCMIN * 1e-3
+    assert abs(change) == pytest.approx(expected * (2500.0 - 800.0) / 2500.0, rel=0.01)
+    assert np.sign(change) == -np.sign(wedge_mrad)  # thicker toward the top: the ghost moves down
+    assert abs(s1["ghost_offset_h_arcmin"]) < 1e-3
+
+
+def test_an_eye_that_sees_no_image_is_told_where_to_look(tmp_path):
+    folder = imaging.plane_mirror(tmp_path / "p")
+    scene = load_scene(folder)
+    scene.eye.gaze = np.array([0.0, -1.0, 0.0])  # away from the mirror
+    with pytest.raises(OpticsError, match="aim the eye at the image"):
+        Analysis(World(scene))
+
+
+def test_pgu_usage_and_requirements_follow_the_target(tmp_path):
+    """A target field of view half the image's: about a quarter of the PGU's area lies inside it."""
+    folder = imaging.plane_mirror(tmp_path / "p", target={"fov_deg": [0.5 * math.degrees(2 * math.atan(0.03)),
+                                                                     0.5 * math.degrees(2 * math.atan(0.015))],
+                                                          "distance_mm": 1200.0})
+    _, out = _analyse(folder, eyebox=False, spot=False)
+    usage = out["summary"]["design_eye"]["pgu_usage"]
+    assert usage == pytest.approx(0.25, abs=0.03)
+    assert out["target"]["distance_mm"] == {"value": 1200.0, "source": "given"}
