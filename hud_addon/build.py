@@ -3,6 +3,7 @@ current scene (the same preset code, no second copy of the geometry)."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -52,6 +53,32 @@ def _apply_object(obj, spec: dict, by_name: dict, root: Path):
         h.emits = True
         schema_ui.apply(h, EMISSION.fields, emission, "emission_", EMISSION.alternatives, root, by_name)
         _apply_aim(h, "emission_", emission.get("aim"), by_name)
+
+
+def surface_blocks(o, center) -> list[dict]:
+    """An object's exact surfaces (tracer.scene.model.Surface) as scene.json "surfaces" blocks in the
+    coordinates of the Blender object built from it: the world's, in mm, less ``center`` (its origin)."""
+    out = []
+    for s in o.surfaces:
+        frame = np.linalg.inv(s.to_local)
+        block = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in s.params.items()
+                 if k not in ("origin", "axis", "x_axis")}
+        out.append({"type": s.type} | block | {"origin": (frame[:3, 3] - center).tolist(),
+                                               "axis": frame[:3, 2].tolist(), "x_axis": frame[:3, 0].tolist()})
+    return out
+
+
+#: The target block's fields that the HUD Optics panel shows; the rest travel as its Target text.
+TARGET_SHOWN = {"eyebox_mm": "optics_eyebox_mm", "ipd_mm": "optics_ipd_mm", "field_grid": "optics_field_grid",
+                "eye_grid": "optics_eye_grid"}
+
+
+def _apply_target(h, target: dict):
+    for key, prop in TARGET_SHOWN.items():
+        if key in target:
+            setattr(h, prop, target[key])
+    rest = {k: v for k, v in target.items() if k not in TARGET_SHOWN}
+    h.optics_target = json.dumps(rest) if rest else ""
 
 
 def _is_factory_cube(obj) -> bool:
@@ -131,6 +158,8 @@ def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]
         obj = bpy.data.objects.new(o.name, mesh)
         obj[TAG] = sc.name
         obj.location = center / unit
+        if o.surfaces:
+            obj.hud.surfaces = json.dumps(surface_blocks(o, center))
         obj.hud.smooth_normals = o.smooth
         if o.smooth:
             mesh.shade_smooth()
@@ -144,6 +173,7 @@ def build_scene(folder, context, replace: bool = True) -> tuple[list, list[str]]
     for name, block in raw_methods.items():
         schema_ui.apply(scene.hud, METHOD_OPTIONS[name].fields, block, f"{name}_", (), Path(sc.root), by_name)
     scene.hud.polarisation = sc.polarisation
+    _apply_target(scene.hud, sc.raw.get("target", {}))
     _build_eye(sc.eye, sc.raw["eye"], scene, coll, unit)
     _build_world(sc, scene)
     if not sc.environment.is_black:  # a HUD against an environment: the hybrid method's two channels

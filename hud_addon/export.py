@@ -122,6 +122,26 @@ def emission_spec(obj) -> dict | None:
     return e
 
 
+def _json_field(text: str, where: str, kind: type):
+    """A JSON text property's value, which must be a ``kind``; ValueError naming ``where`` otherwise."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{where}: not valid JSON ({e})") from None
+    if not isinstance(value, kind):
+        raise ValueError(f"{where}: expected a JSON {kind.__name__}")
+    return value
+
+
+def target_spec(scene) -> dict:
+    """The target block of the optical analysis from the HUD Optics panel (eyebox, IPD, grids) and the
+    rest of a preset's block (its Target text)."""
+    h = scene.hud
+    rest = _json_field(h.optics_target, "Render Properties > HUD Optics > Target", dict) if h.optics_target else {}
+    return rest | {"eyebox_mm": list(h.optics_eyebox_mm), "ipd_mm": h.optics_ipd_mm,
+                   "field_grid": list(h.optics_field_grid), "eye_grid": list(h.optics_eye_grid)}
+
+
 def methods_spec(scene) -> dict:
     """Every method's options from the render settings (the folder renders the same with any method)."""
     out = {}
@@ -408,6 +428,9 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
                  "material": material_spec(obj, plan, stems[item.name])}
         if obj.hud.smooth_normals:
             entry["smooth_normals"] = True
+        if obj.hud.surfaces:
+            entry["surfaces"] = _json_field(obj.hud.surfaces, f"object {item.name!r}: HUD Optical Role > Exact "
+                                                               "surfaces", list)
         emission = emission_spec(obj)
         if emission is not None:
             entry["emission"] = emission
@@ -415,7 +438,7 @@ def export_scene(depsgraph, folder, check: Callable[[Path], object] | None = Non
     data = {"format": "hud-scene", "version": 1, "name": scene.name,
             "description": f"exported from Blender {bpy.app.version_string}",
             "eye": eye, "environment": environment, "objects": objects,
-            "polarisation": scene.hud.polarisation, "methods": methods_spec(scene)}
+            "polarisation": scene.hud.polarisation, "methods": methods_spec(scene), "target": target_spec(scene)}
     text = json.dumps(data, indent=2) + "\n"
 
     target.parent.mkdir(parents=True, exist_ok=True)

@@ -12,6 +12,7 @@ from bpy.props import (
     FloatProperty,
     FloatVectorProperty,
     IntProperty,
+    IntVectorProperty,
     PointerProperty,
     StringProperty,
 )
@@ -115,6 +116,28 @@ def _scene_annotations() -> dict:
         "eyebox_folder": StringProperty(name="Folder", default="//eyebox/", subtype="DIR_PATH",
                                         description="Where eyebox.csv, eyebox.png and eyebox.json are written "
                                                     "(// is the .blend's folder)"),
+        # The optical analysis (HUD Optics panel; scene.json "target"): lengths stored in mm.
+        "optics_eyebox_mm": FloatVectorProperty(name="Eyebox", size=2, default=(130.0, 50.0), min=0.0, max=1000.0,
+                                                description="Eyebox width and height, centred on the camera, mm"),
+        "optics_eyebox_mm_shown": length_twin("optics_eyebox_mm", "Eyebox",
+                                              "Width and height of the eyebox, centred on the camera (the design eye "
+                                              "point), across the vehicle's forward direction", size=2),
+        "optics_ipd_mm": FloatProperty(name="IPD", default=65.0, min=1.0, max=200.0,
+                                       description="Interpupillary distance of the binocular pairs, mm"),
+        "optics_ipd_mm_shown": length_twin("optics_ipd_mm", "IPD", "Interpupillary distance of the binocular pairs "
+                                           "(65 mm typical, 50 to 75 mm across drivers)", nonnegative=True),
+        "optics_field_grid": IntVectorProperty(name="Field grid", size=2, default=(5, 3), min=2, max=41,
+                                               description="PGU field points across and up its active area, edges "
+                                                           "included"),
+        "optics_eye_grid": IntVectorProperty(name="Eye grid", size=2, default=(9, 5), min=1, max=41,
+                                             description="Eye points across and up the eyebox, edges included"),
+        "optics_folder": StringProperty(name="Folder", default="//optics/", subtype="DIR_PATH",
+                                        description="Where optics.json, optics.csv and the pictures are written "
+                                                    "(// is the .blend's folder)"),
+        "optics_target": StringProperty(name="Target", default="",
+                                        description="The rest of the scene's target block (scene.json \"target\": "
+                                                    "distance, look-down and look-over angles, field of view, PGU, "
+                                                    "requirements) as a preset gave it, JSON"),
     }
     for name, options in METHOD_OPTIONS.items():
         annotations(options.fields, f"{name}_", seen=ann)
@@ -130,6 +153,10 @@ def _object_annotations() -> dict:
                                        description="Interpolate vertex normals (curved mirrors and lenses)"),
         "emits": BoolProperty(name="Emits light", default=False,
                               description="The object is also a Lambertian light source (any material can emit)"),
+        "surfaces": StringProperty(name="Exact surfaces", default="",
+                                   description="The exact surfaces of the object's optic (scene.json \"surfaces\", "
+                                               "in the object's own coordinates, mm) as a preset gave them, JSON: "
+                                               "hits on the faces that lie on one take its shape and normal"),
     }
     for cls in MATERIALS.values():
         annotations(cls.schema.fields, "", cls.schema.alternatives, ann)

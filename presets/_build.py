@@ -179,6 +179,11 @@ class SceneBuilder:
             obj["surfaces"] = surfaces
         self.data["objects"].append(obj)
 
+    def add_windshield(self, name: str, windshield: dict, material: dict, transform: list):
+        """Add a windshield made from its parameters (tracer.scene.windshield.WINDSHIELD) in place of a mesh."""
+        self.data["objects"].append({"name": name, "material": material, "transform": {"matrix": transform},
+                                     "windshield": windshield})
+
     def write(self, **blocks):
         self.data.update(blocks)
         (self.folder / "scene.json").write_text(json.dumps(self.data, indent=2) + "\n")

@@ -56,6 +56,11 @@ SCATTER_SIGMA_DEG = (3.5, 3.0)
 LCD_TRANSMITTANCE = 0.05
 CONTRAST = 300.0
 MIRROR_R = 0.9
+WINDSHIELD_MM = (700.0, 450.0)  # the glass's width and height
+#: The target image (tracer.scene.format.TARGET): the design's, over the eyebox its LEDs light
+#: (docs/results/designs.md: 120 x 40 mm between the outermost grid points at half luminance).
+TARGET = {"distance_mm": VID, "look_down_deg": LOOK_DOWN_DEG, "look_over_deg": 0.0, "fov_deg": list(FOV_DEG),
+          "eyebox_mm": [120.0, 40.0], "pgu": "lcd"}
 
 
 def _rot(v: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
@@ -64,8 +69,20 @@ def _rot(v: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
     return v * math.cos(a) + np.cross(axis, v) * math.sin(a) + axis * (axis @ v) * (1 - math.cos(a))
 
 
-def design() -> dict:
-    """The layout: every point and direction of the optical design (world mm)."""
+def windshield_power(radius_x_mm: float, radius_y_mm: float, incidence_deg: float) -> float:
+    """The mean power (1/mm) of a windshield's inner surface as a mirror met at ``incidence_deg`` in its
+    y-z plane (Coddington: 2 / (R_y cos(theta)) in that plane, 2 cos(theta) / R_x across it; 0 for a
+    flat radius)."""
+    c = math.cos(math.radians(incidence_deg))
+    tangential = 2 / (radius_y_mm * c) if radius_y_mm else 0.0
+    sagittal = 2 * c / radius_x_mm if radius_x_mm else 0.0
+    return 0.5 * (tangential + sagittal)
+
+
+def design(radii_mm: tuple[float, float] = (0.0, 0.0)) -> dict:
+    """The layout: every point and direction of the optical design (world mm). ``radii_mm``: a curved
+    windshield's inner radii [across, up] (hud-direct-curved): the LCD moves to where the mirror and the
+    windshield's mean power (:func:`windshield_power`) together image it at VID."""
     mirror = np.zeros(3)
     ld = math.radians(LOOK_DOWN_DEG)
     gaze = np.array([0.0, math.cos(ld), -math.sin(ld)])
@@ -80,13 +97,17 @@ def design() -> dict:
     led = mirror + LED_TO_MIRROR * r2
     d2 = EYE_TO_WINDSHIELD + WINDSHIELD_TO_MIRROR
     power = 1 / LED_TO_MIRROR + 1 / d2
-    s_o = 1 / (power + 1 / (VID - d2))
-    magnification = (VID - d2) / s_o
+    incidence = math.degrees(math.acos(abs(gaze @ n_ws)))
+    # the windshield's virtual image at VID - a behind it; its object (the mirror's image) at u: 1/u = P + 1/v
+    v = VID - EYE_TO_WINDSHIELD
+    u = 1 / (windshield_power(*radii_mm, incidence) + 1 / v)
+    s_i = u - WINDSHIELD_TO_MIRROR
+    s_o = 1 / (power + 1 / s_i)
+    magnification = (s_i / s_o) * (v / u)
     lcd_size = [2 * VID * math.tan(math.radians(f) / 2) / magnification for f in FOV_DEG]
     return {"mirror": mirror, "gaze": gaze, "n_ws": n_ws, "w_point": w_point, "eye": eye, "eye_image": eye_image,
             "r1": r1, "r2": r2, "led": led, "s_o": s_o, "magnification": magnification, "lcd_size": lcd_size,
-            "lcd_center": mirror + s_o * r2, "d2": d2, "incidence_windshield_deg":
-            math.degrees(math.acos(abs(gaze @ n_ws)))}
+            "lcd_center": mirror + s_o * r2, "d2": d2, "incidence_windshield_deg": incidence}
 
 
 def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tuple[float, float],
@@ -109,6 +130,19 @@ def ellipsoid_patch(f1: np.ndarray, f2: np.ndarray, center: np.ndarray, size: tu
         dg = (a @ normal) / la + (b @ normal) / lb
         s -= g / dg
     return q + s[:, None] * normal, f
+
+
+def ellipsoid_surface(f1: np.ndarray, f2: np.ndarray, center: np.ndarray) -> dict:
+    """The exact surface (tracer.scene.format.SURFACE, world coordinates) of the ellipsoid with foci f1,
+    f2 through ``center``, as a conic whose vertex is the end of the major axis beyond f2: semi-axes a
+    = (|X f1| + |X f2|) / 2 and b, vertex radius R = b^2 / a, conic constant k = -(c / a)^2 (c: half
+    the foci's distance). Its sag covers the half of the ellipsoid on f2's side."""
+    a = 0.5 * (np.linalg.norm(f1 - center) + np.linalg.norm(f2 - center))
+    c = 0.5 * np.linalg.norm(f2 - f1)
+    w = (f2 - f1) / (2 * c)
+    vertex = 0.5 * (f1 + f2) + a * w
+    return {"type": "conic", "radius_mm": (a * a - c * c) / a, "conic": -(c / a) ** 2, "origin": vertex.tolist(),
+            "axis": (-w).tolist(), "x_axis": [1.0, 0.0, 0.0]}
 
 
 #: hud-direct-condenser: a plano-convex condenser (convex face toward the scatterer) CONDENSER_GAP mm
@@ -139,27 +173,36 @@ def condenser_layout() -> dict:
 
 def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: bool = False, name: str = NAME,
           summary: str = SUMMARY, lcd_polariser_deg: float | None = None, film_axis_deg: float | None = None,
-          analyser: dict | None = None) -> Path:
+          analyser: dict | None = None, windshield: dict | None = None, grid_slide: bool = False) -> Path:
     """The scene folder. ``lcd_polariser_deg``: the LCD's output polariser axis (degrees from its local
     x, which is the world x: 0 gives light that the mirror and the windshield see as s light);
     ``film_axis_deg``: a half-wave retarder film 1 mm in front of the LCD with its fast axis at that
-    angle; ``analyser``: the eye's analyser block (polarised sunglasses), presets/hud_direct_polarised.py."""
-    d = design()
+    angle; ``analyser``: the eye's analyser block (polarised sunglasses), presets/hud_direct_polarised.py;
+    ``windshield``: fields of a parametric windshield (tracer.scene.windshield.WINDSHIELD: a wedge, radii)
+    in place of the flat slab, the same glass at the same place; ``grid_slide``: the LCD shows the
+    optical analysis's 5 x 3 field grid in place of the symbols (presets/hud_direct_optics.py)."""
+    ws = windshield or {}
+    d = design((ws.get("radius_x_mm", 0.0), ws.get("radius_y_mm", 0.0)))
     sb = SceneBuilder(Path(folder), name, summary)
     x_axis = np.array([1.0, 0.0, 0.0])
     r2 = d["r2"]
     # Windshield: a glass slab whose inner face passes through the windshield point.
-    slab_center = d["w_point"] - 0.5 * GLASS_MM * d["n_ws"]
-    v, f = box(700.0, 450.0, GLASS_MM)
-    sb.add("windshield", (v, f), {"type": "dielectric", "ior": 1.52},
-           frame_matrix(slab_center, x_axis, d["n_ws"]))
-    # Mirror: the ellipsoid patch with foci E' and the centre LED.
+    if windshield is None:
+        slab_center = d["w_point"] - 0.5 * GLASS_MM * d["n_ws"]
+        v, f = box(*WINDSHIELD_MM, GLASS_MM)
+        sb.add("windshield", (v, f), {"type": "dielectric", "ior": 1.52},
+               frame_matrix(slab_center, x_axis, d["n_ws"]))
+    else:  # its inner surface through the windshield point, the glass behind it
+        sb.add_windshield("windshield", {"size_mm": list(WINDSHIELD_MM), "thickness_mm": GLASS_MM} | windshield,
+                          {"type": "dielectric", "ior": 1.52}, frame_matrix(d["w_point"], x_axis, d["n_ws"]))
+    # Mirror: the ellipsoid patch with foci E' and the centre LED, and that ellipsoid as its exact surface.
     sb.add("mirror", ellipsoid_patch(d["eye_image"], d["led"], d["mirror"], (170.0, 120.0), x_axis),
-           {"type": "mirror", "reflectance": MIRROR_R}, smooth=True)
+           {"type": "mirror", "reflectance": MIRROR_R}, smooth=True,
+           surfaces=[ellipsoid_surface(d["eye_image"], d["led"], d["mirror"])])
     # LCD, facing the mirror; its slide is written beside the meshes.
     w_lcd, h_lcd = d["lcd_size"]
     img_rel = "textures/slide.png"
-    slide_image(sb.folder / img_rel)
+    slide_image(sb.folder / img_rel, grid=grid_slide)
     lcd_v, lcd_f, lcd_uv = rectangle(w_lcd, h_lcd)
     lcd_frame = frame_matrix(d["lcd_center"], x_axis, -r2)
     lcd_material = {"type": "lcd", "image": img_rel, "transmittance": LCD_TRANSMITTANCE, "contrast_ratio": CONTRAST}
@@ -228,4 +271,5 @@ def write(folder, pupil_mm: float = PUPIL_MM, resolution=RESOLUTION, condenser: 
     return sb.write(
         eye=eye_block,
         methods={"forward": {"max_depth": 24}, "backward": {"max_depth": 24}},
+        target=TARGET,
     )

@@ -1,5 +1,5 @@
-"""The LCD slide of hud-direct (paper Fig. 6): clear symbols on a black background, drawn from a
-5 x 7 pixel font so that no image file is committed."""
+"""The LCD slides of hud-direct (paper Fig. 6): clear symbols on a black background, drawn from a
+5 x 7 pixel font so that no image file is committed, and a grid for the optical analysis's variants."""
 
 from __future__ import annotations
 
@@ -54,9 +54,24 @@ def slide_array(width: int = 240, height: int = 80) -> np.ndarray:
     return c.astype(np.float64)
 
 
-def slide_image(path: Path, width: int = 240, height: int = 80) -> Path:
-    """Write the slide as an 8-bit PNG (0 or 255: exact in sRGB and linear alike)."""
-    a = (255 * slide_array(width, height)).astype(np.uint8)
+def grid_array(width: int = 240, height: int = 80, lines=(5, 3), thickness: int = 2) -> np.ndarray:
+    """(height, width) float array of a grid slide: ``lines`` [across, up] clear lines ``thickness``
+    pixels wide, the outermost along the slide's edges, on black: the optical analysis's field grid
+    (tracer.scene.format.TARGET field_grid), for a render that shows the distortion it reports."""
+    c = np.zeros((height, width), dtype=bool)
+    for k in range(lines[0]):
+        x = round(k * (width - thickness) / (lines[0] - 1))
+        c[:, x:x + thickness] = True
+    for k in range(lines[1]):
+        y = round(k * (height - thickness) / (lines[1] - 1))
+        c[y:y + thickness, :] = True
+    return c.astype(np.float64)
+
+
+def slide_image(path: Path, width: int = 240, height: int = 80, grid: bool = False) -> Path:
+    """Write the slide (the symbols, or with ``grid`` the grid) as an 8-bit PNG (0 or 255: exact in
+    sRGB and linear alike)."""
+    a = (255 * (grid_array(width, height) if grid else slide_array(width, height))).astype(np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_png(path, np.repeat(a[:, :, None], 3, axis=2))
     return path

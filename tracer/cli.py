@@ -402,6 +402,46 @@ def cmd_eyebox(args) -> int:
     return 0
 
 
+#: The grids' ranges (tracer.scene.format.TARGET): --field-grid, --eye-grid.
+GRID_RANGES = {"--field-grid": (2, 41), "--eye-grid": (1, 41)}
+
+
+def cmd_optics(args) -> int:
+    from .analysis.optics import OpticsError, analyse
+    from .products.optics import OUTPUT_NAMES, output_files, readouts
+    from .products.outputs import OutputError, OutputSet
+    from .scene import load_scene
+
+    for flag, value in (("--field-grid", args.field_grid), ("--eye-grid", args.eye_grid)):
+        lo, hi = GRID_RANGES[flag]
+        if value is not None and not all(lo <= v <= hi for v in value):
+            print(f"error: {flag}: each count must lie in [{lo}, {hi}], got {value[0]} {value[1]}", file=sys.stderr)
+            return EXIT_INPUT
+    try:
+        with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
+            scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
+            if args.field_grid is not None:
+                scene.target["field_grid"] = tuple(args.field_grid)
+            if args.eye_grid is not None:
+                scene.target["eye_grid"] = tuple(args.eye_grid)
+            outputs = OutputSet(args.out, OUTPUT_NAMES, scene_root=scene.root).open()  # before the first ray
+            try:
+                doc = analyse(scene, eyebox=not args.no_eyebox, compare_mesh=not args.no_mesh_comparison)
+                outputs.commit(output_files(doc))
+                outputs.keep()
+            finally:
+                outputs.close()
+    except OpticsError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_NO_LIGHT
+    except (*WRITE_ERRORS, OutputError) as e:
+        return _write_errors(e, args.out)
+    print(f"optics of {doc['scene']} in {doc['seconds']['total']:.2f} s -> {args.out}", file=sys.stderr)
+    for label, text in readouts(doc):
+        print(f"  {label}: {text}", file=sys.stderr)
+    return 0 if doc["requirements_met"] else EXIT_NO_LIGHT
+
+
 #: Seconds of checking a sweep's grid (loading every grid point's scene) before the progress bar shows it.
 SHOW_CHECKS_AFTER_S = 2.0
 
@@ -411,12 +451,15 @@ def cmd_sweep(args) -> int:
     from .products.outputs import OutputError
     from .runtime.allocator import keep_freed_memory
     from .scans.fields import SweepArgumentError
-    from .scans.plan import check_arguments, plan_sweep
+    from .scans.plan import DEFAULT_Y, OPTICS_Y, check_arguments, plan_sweep
     from .scans.sweep import open_outputs, run_sweep
 
     try:
+        if not args.optics and args.rays is None and args.seconds is None:
+            raise ArgumentError("give a budget for each run, --rays or --seconds (or --optics: the optical analysis "
+                                "alone)")
         check_render_args(args)
-        fields, requirements = check_arguments(args.set, args.log, args.require, args.x, args.y)
+        fields, requirements = check_arguments(args.set, args.log, args.require, args.x, args.y, args.optics)
     except ArgumentError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
@@ -424,7 +467,7 @@ def cmd_sweep(args) -> int:
         print(f"error: {e.argument}: {e.message}", file=sys.stderr)
         return EXIT_INPUT
     keep_freed_memory()
-    budget = Budget(rays=args.rays, seconds=args.seconds)
+    budget = None if args.optics else Budget(rays=args.rays, seconds=args.seconds)
     flag = StopFlag()
     bar = None if args.quiet else ProgressBar()
     absent: set[str] = set()
@@ -453,14 +496,16 @@ def cmd_sweep(args) -> int:
             outputs = open_outputs(args.out, scene_dir)  # checked and locked before the grid is loaded
             try:
                 plan = plan_sweep(scene_dir, fields, requirements, tempfile.mkdtemp(dir=tmp), args.x, args.y,
-                                  progress=checking)
-                crowded = check_workers(args.workers, max((json.loads(plan.scene_text(k))["eye"]["resolution"]
-                                                           for k in range(len(plan.grid))), key=math.prod))
+                                  progress=checking, default_y=OPTICS_Y if args.optics else DEFAULT_Y)
+                crowded = None if args.optics else \
+                    check_workers(args.workers, max((json.loads(plan.scene_text(k))["eye"]["resolution"]
+                                                     for k in range(len(plan.grid))), key=math.prod))
                 if crowded:
                     print(f"warning: {crowded}", file=sys.stderr)
                 previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
                 try:
-                    result = run_sweep(plan, args.method, budget, args.seed, outputs, workers=args.workers,
+                    result = run_sweep(plan, "optics" if args.optics else args.method, budget, args.seed, outputs,
+                                       workers=args.workers,
                                        batch_size=args.batch_size, progress=bar, should_stop=flag, on_run=on_run)
                 finally:
                     for s, handler in previous.items():
@@ -585,6 +630,25 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder")
     y.set_defaults(func=cmd_eyebox)
+    q = sub.add_parser("optics", help="the optical analysis: VID, distortion, disparity and ghost over the eyebox",
+                       description="Trace chief rays and thin bundles through the specular chain from the eye to the "
+                                   "PGU, for the primary image and the ghost, from the design eye point and a grid of "
+                                   "eye points over the eyebox, and report the metrics of a HUD design review against "
+                                   "the scene's target block (docs/user/optics.md). Exit 3 where a requirement of "
+                                   "target.requirements is not met or the scene shows no image.")
+    q.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
+    q.add_argument("--out", required=True, help="output folder (" + ", ".join(
+        ("optics.json", "optics.csv", "optics-distortion.png", "optics-eyebox.png", "optics-vid.png")) + ")")
+    q.add_argument("--field-grid", type=int, nargs=2, default=None, metavar=("NX", "NY"),
+                   help="PGU field points across and up (default: the scene's target.field_grid, else 5 3)")
+    q.add_argument("--eye-grid", type=int, nargs=2, default=None, metavar=("NX", "NY"),
+                   help="eye points across and up the eyebox (default: the scene's target.eye_grid, else 9 5)")
+    q.add_argument("--no-eyebox", action="store_true", help="the design eye point only")
+    q.add_argument("--no-mesh-comparison", action="store_true",
+                   help="skip tracing the optics with exact surfaces again on their meshes alone")
+    q.add_argument("--allow-external-files", action="store_true",
+                   help="let the scene name meshes and images outside its folder")
+    q.set_defaults(func=cmd_optics)
     w = sub.add_parser("sweep", help="render a scene over a grid of scene.json values and judge each run",
                        description="Render a scene once per point of a grid of scene.json values (the cartesian "
                                    "product of every --set), with the same seed for every run, and say for which "
@@ -598,9 +662,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="make this --set field's values geometric (START and STOP > 0)")
     w.add_argument("--method", choices=sorted(INTEGRATORS), default=DEFAULT_METHOD,
                    help=f"light-transport method (default {DEFAULT_METHOD})")
-    b = w.add_mutually_exclusive_group(required=True)
+    b = w.add_mutually_exclusive_group()
     b.add_argument("--rays", type=ray_count, help="budget of each run in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float, help="budget of each run in wall-clock seconds")
+    b.add_argument("--optics", action="store_true",
+                   help="run the optical analysis (hud-trace optics) in place of a render: no budget; the keys of "
+                        "--require and --y lie in optics (optics.design_eye.ghost_separation_arcmin, "
+                        "optics.eyebox.dipvergence_mrad)")
     w.add_argument("--seed", type=int, default=0, help="the seed of every run (default 0)")
     w.add_argument("--workers", type=int, default=available_cpus(),
                    help="processes per run (default: one per core)")

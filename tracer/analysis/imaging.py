@@ -194,10 +194,12 @@ class Imaging:
         theta = np.stack([(d * e_h[:, ii]).sum(axis=0), (d * e_v[:, ii]).sum(axis=0)]) / cos
         mean_v = 0.5 * (vergence[0, 0] + vergence[1, 1])
         blur = theta + mean_v[ii] * delta  # where each ray lands on the retina of an eye focused at 1 / mean_v
-        blur = np.where(ok, blur, np.nan).reshape(2, n, p)
-        centred = blur - np.nanmean(blur, axis=2, keepdims=True)
-        with np.errstate(invalid="ignore"):
-            return np.sqrt(np.nanmean((centred ** 2).sum(axis=0), axis=1))
+        ok = ok.reshape(n, p)
+        blur = np.where(ok, blur.reshape(2, n, p), 0.0)
+        count = ok.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a point none of whose rays lands: NaN
+            centred = blur - blur.sum(axis=2, keepdims=True) / count[:, None]
+            return np.sqrt(np.where(ok, (centred ** 2).sum(axis=0), 0.0).sum(axis=1) / count)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

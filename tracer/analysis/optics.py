@@ -229,6 +229,14 @@ def _nan(fn, a, default=None):
     return float(fn(a)) if a.size else default
 
 
+def _spread(a: np.ndarray, axis: int) -> np.ndarray:
+    """max - min of the finite values of ``a`` along ``axis`` (NaN where there are none)."""
+    finite = np.isfinite(a)
+    hi = np.where(finite, a, -np.inf).max(axis=axis)
+    lo = np.where(finite, a, np.inf).min(axis=axis)
+    return np.where(finite.any(axis=axis), hi - lo, np.nan)
+
+
 def _signed_max(a) -> float | None:
     """The value of largest magnitude among the finite values of ``a`` (its sign kept)."""
     a = np.asarray(a, dtype=np.float64).ravel()
@@ -552,8 +560,7 @@ class Analysis:
         vm = eyes["vergence"]["mean"]  # (e, f) 1/mm
         dyn = np.sqrt((eyes["dynamic"] ** 2).sum(axis=0))  # (e, f) rad
         summary = {
-            "focus_variation_d": _nan(np.max, np.nanmax(vm, axis=0) * 1e3 - np.nanmin(vm, axis=0) * 1e3)
-            if np.isfinite(vm).any() else None,
+            "focus_variation_d": _nan(np.max, _spread(vm, axis=0) * 1e3),
             "dynamic_distortion_mrad": _nan(np.max, dyn * MRAD),
             "vid_min_mm": _nan(np.min, _distance(vm)), "vid_max_mm": _nan(np.max, _distance(vm)),
             "astigmatism_d": _nan(np.max, eyes["vergence"]["astigmatism"] * 1e3),
@@ -605,3 +612,108 @@ def _value(a, j):
     if x.ndim == 0:
         return float(x) if np.isfinite(x) else None
     return [None if not np.isfinite(v) else float(v) for v in x.ravel()]
+
+
+#: The eyebox summary's metrics (optics.json's ``summary.eyebox``).
+EYEBOX_KEYS = ("focus_variation_d", "dynamic_distortion_mrad", "vid_min_mm", "vid_max_mm", "astigmatism_d",
+               "ghost_separation_arcmin", "ghost_offset_v_arcmin", "convergence_mrad", "divergence_mrad",
+               "dipvergence_mrad", "binocular_pairs")
+#: Further design-eye figures that optics.json's summary carries besides :data:`DESIGN_KEYS`.
+DESIGN_EXTRAS = ("vid_tangential_mm", "vid_sagittal_mm", "astigmatism_centre_d")
+#: What a requirement's KEY may name: ``design_eye.KEY`` or ``eyebox.KEY``.
+REQUIREMENT_KEYS = {"design_eye": DESIGN_KEYS + DESIGN_EXTRAS, "eyebox": EYEBOX_KEYS}
+
+
+def check_metric(names: list, where: str) -> None:
+    """Refuse a metric path (``["design_eye", "vid_mm"]``) that names no metric of optics.json's summary
+    (:data:`REQUIREMENT_KEYS`). Raises :class:`OpticsError` beginning with ``where``."""
+    import difflib
+
+    if len(names) != 2 or names[0] not in REQUIREMENT_KEYS:
+        raise OpticsError(f"{where}: KEY must be design_eye.METRIC or eyebox.METRIC (design_eye.vid_mm)")
+    known = REQUIREMENT_KEYS[names[0]]
+    if names[1] not in known:
+        near = difflib.get_close_matches(names[1], known, n=1)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
+        raise OpticsError(f"{where}: {names[0]} has no metric {names[1]!r}{hint}; see docs/user/optics.md")
+
+
+def check_requirements(requirements) -> None:
+    """Refuse, before any ray, a requirement whose KEY names no metric of optics.json's summary
+    (:func:`check_metric`), naming ``target.requirements[i]``."""
+    for i, req in enumerate(requirements):
+        check_metric([arg for _, arg in req.steps], f"target.requirements[{i}]: {req.text!r}")
+
+
+def _exact_objects(world, chains: Chains) -> list[str]:
+    """The objects on the chains that have exact surfaces."""
+    slots = {slot for chain in (chains.primary, chains.ghost) if chain for slot, _ in chain.steps}
+    return sorted(o.name for o in world.scene.objects if o.slot in slots and o.surfaces)
+
+
+def _numbers(block: dict) -> dict:
+    return {k: v for k, v in block.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+
+
+def mesh_comparison(exact: dict, meshed: dict) -> dict:
+    """What the meshes alone would cost each summary metric: {section: {metric: {"exact", "mesh",
+    "error"}}}, the error mesh - exact in the metric's unit."""
+    out = {}
+    for section in ("design_eye", "eyebox"):
+        a, b = _numbers(exact["summary"].get(section, {})), _numbers(meshed["summary"].get(section, {}))
+        out[section] = {k: {"exact": a[k], "mesh": b[k], "error": b[k] - a[k]} for k in a if k in b}
+    return out
+
+
+def analyse(scene, eyebox: bool = True, spot: bool = True, compare_mesh: bool = True, world=None) -> dict:
+    """optics.json's document for ``scene`` (tracer.scene.Scene): the chains, the target, the summary at
+    the design eye point (and over the eyebox with ``eyebox``), the requirements judged, every field
+    point, eye point and binocular pair, each metric's unit and definition, and, where an optic of the
+    chains has exact surfaces and ``compare_mesh``, the same summary traced on the meshes alone.
+    Raises :class:`OpticsError` where the scene shows no image to analyse."""
+    from ..transport.world import World
+
+    check_requirements(scene.target.get("requirements", []))
+    t0 = time.perf_counter()
+    world = World(scene) if world is None else world
+    analysis = Analysis(world)
+    out = analysis.run(eyebox=eyebox, spot=spot)
+    doc = {
+        "scene": scene.name,
+        "chains": {"pgu": analysis.chains.pgu, "primary": analysis.chains.primary.text,
+                   "ghost": analysis.chains.ghost.text if analysis.chains.ghost else None},
+        "design_eye_mm": [float(x) for x in analysis.dep],
+        "vehicle_axes": {"forward": analysis.frame.forward.tolist(), "right": analysis.frame.right.tolist(),
+                         "up": analysis.frame.up.tolist()},
+        "exact_surfaces": _exact_objects(world, analysis.chains),
+    }
+    doc |= out
+    doc["requirements"] = [r.judge(out["summary"]) for r in scene.target.get("requirements", [])]
+    doc["requirements_met"] = all(r["met"] for r in doc["requirements"])
+    if compare_mesh and doc["exact_surfaces"]:
+        meshed = Analysis(World(scene, exact_surfaces=False)).run(eyebox=eyebox, spot=spot)
+        doc["mesh_comparison"] = mesh_comparison(out, meshed)
+    units = {k: {"unit": u, "definition": d} for k, (u, d) in DEFINITIONS.items()}
+    doc["definitions"] = units
+    doc["seconds"] = dict(out["seconds"]) | {"total": time.perf_counter() - t0}
+    return doc
+
+
+def report_block(doc: dict) -> dict:
+    """report.json's ``optics`` block (and a sweep's ``optics.*`` figures) of :func:`analyse`'s document:
+    the chains, the target's values, the design eye's and the eyebox's summaries, the requirements."""
+    return {"chains": doc["chains"], "target": {k: (v["value"] if isinstance(v, dict) else v)
+                                                 for k, v in doc["target"].items()},
+            **doc["summary"], "requirements": doc["requirements"], "requirements_met": doc["requirements_met"],
+            "seconds": doc["seconds"]["total"]}
+
+
+def optics_block(scene, world=None) -> dict:
+    """report.json's ``optics`` block for a render (:func:`report_block`, without spots and the mesh
+    comparison), or {"error": why} where the scene shows no image to analyse."""
+    from ..transport.sequential import ChainError
+
+    try:
+        return report_block(analyse(scene, spot=False, compare_mesh=False, world=world))
+    except (OpticsError, ChainError) as e:
+        return {"error": str(e)}

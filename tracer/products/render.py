@@ -23,6 +23,7 @@ import numpy as np
 from ..analysis.aims import aim_preflight
 from ..analysis.brightness import brightness_theorem
 from ..analysis.hud import hud_figures
+from ..analysis.optics import optics_block
 from ..analysis.sections import find_sections
 from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from ..core.imageio import read_exr_channels, read_image, write_exr, write_png
@@ -32,6 +33,7 @@ from ..optics.pupil import pupil_diameter_mm
 from ..runtime.parallel import render_parallel
 from ..scene import Scene, load_scene
 from ..transport.world import World
+from .optics import clean
 from .outputs import OutputFile, OutputSet
 from .report import build_report, finite_json
 from .tonemap import adaptation_luminance, tonemap_ward
@@ -188,6 +190,8 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
     report["polarisation"] = world.polarisation_report()
     report["hud"] = figures
+    report["optics"] = clean(optics_block(scene, world)) if analyse and world.accel is not None and not result.partial \
+        else None
     run_id = uuid.uuid4().hex
     report = {"run_id": run_id} | report
     attrs = {"hud:method": result.method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),

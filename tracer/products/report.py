@@ -93,7 +93,7 @@ REPORT_SECTIONS = ("run_id", "tracer", "scene", "method", "seed", "budget", "par
                    "paths_found_light", "batches", "workers", "seconds", "rays_per_second", "efficiency",
                    "efficiency_definition", "luminance", "components", "replicates", "stage_seconds",
                    "adaptation_luminance", "adaptation_mode", "noise", "preview", "image", "warnings",
-                   "method_details", "brightness_theorem", "polarisation", "hud")
+                   "method_details", "brightness_theorem", "polarisation", "hud", "optics")
 
 
 def finite_json(value, where: str = "report") -> str:
@@ -165,7 +165,7 @@ def readouts(report: dict) -> list[tuple[str, str]]:
 
 #: Units of report figures by the end of their name (the report names every physical quantity so).
 UNIT_SUFFIXES = {"_cd_m2": "cd/m^2", "_deg": "deg", "_mm": "mm", "_mrad": "mrad", "_mm2": "mm^2", "_lm": "lm",
-                 "_lx": "lx", "seconds": "s", "_px": "px"}
+                 "_lx": "lx", "seconds": "s", "_px": "px", "_arcmin": "arcmin", "_percent": "%", "_d": "D"}
 #: Units of figures whose names do not end in one.
 UNITS = {"adaptation_luminance": "cd/m^2", "rays": "rays", "paths": "paths", "rays_per_second": "rays/s",
          "luminance.mean": "cd/m^2", "luminance.max": "cd/m^2", "luminance.log_average": "cd/m^2",

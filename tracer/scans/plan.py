@@ -33,6 +33,8 @@ MAX_PANELS = 8
 #: The chart's panels when neither ``--y`` nor ``--require`` names any: the symbols' luminance and the
 #: contrast ratio (tracer.analysis.hud).
 DEFAULT_Y = ("hud.symbol_cd_m2", "hud.contrast_ratio")
+#: The same for a sweep of the optical analysis (--optics).
+OPTICS_Y = ("optics.design_eye.ghost_separation_centre_arcmin", "optics.design_eye.static_distortion_mrad")
 
 
 # -- the plan: fields resolved, every grid point validated ----------------------------------------------
@@ -82,9 +84,10 @@ class SweepPlan:
 
 
 def check_arguments(sets: list[str], log: list[str], requires: list[str], x: str | None,
-                    y: list[str]) -> tuple[list[SweepField], list[Requirement]]:
+                    y: list[str], optics: bool = False) -> tuple[list[SweepField], list[Requirement]]:
     """Every argument's syntax and the number of runs, before the scene is read: (fields, requirements).
-    Raises :class:`SweepArgumentError`."""
+    ``optics``: a sweep of the optical analysis, whose keys lie in ``optics``. Raises
+    :class:`SweepArgumentError`."""
     if not sets:
         raise SweepArgumentError("--set", "give at least one FIELD=START:STOP:N")
     fields = [parse_set(s) for s in sets]
@@ -110,13 +113,13 @@ def check_arguments(sets: list[str], log: list[str], requires: list[str], x: str
             steps = parse_field(key, globs=False)
         except ValueError as e:
             raise SweepArgumentError(f"--y {key}", str(e)) from None
-        check_report_key(f"--y {key}", steps)
+        check_report_key(f"--y {key}", steps, optics)
     runs = math.prod(f.n for f in fields)
     if runs > MAX_RUNS:
         sizes = " x ".join(str(f.n) for f in fields)
         raise SweepArgumentError("--set", f"{sizes} = {runs} runs (every combination of the fields' values), more "
                                           f"than {MAX_RUNS}")
-    return fields, [parse_requirement(r) for r in requires]
+    return fields, [parse_requirement(r, optics) for r in requires]
 
 
 def _link_or_copy(src, dst):
@@ -127,7 +130,7 @@ def _link_or_copy(src, dst):
 
 
 def plan_sweep(folder, fields: list[SweepField], requirements: list[Requirement], work_root, x: str | None = None,
-               y: list[str] = (), progress=None) -> SweepPlan:
+               y: list[str] = (), progress=None, default_y: tuple[str, ...] = DEFAULT_Y) -> SweepPlan:
     """Resolve ``fields`` in the scene at ``folder`` and load every grid point's scene once (see the
     module docstring), all before any ray. ``work_root``: an empty temporary folder for the working
     copy. Raises :class:`~tracer.core.errors.SceneError` for the scene as given, and
@@ -155,7 +158,7 @@ def plan_sweep(folder, fields: list[SweepField], requirements: list[Requirement]
                     ignore=lambda d, names: [SCENE_FILE] if Path(d) == folder else [])
     grid = list(itertools.product(*(f.values for f in fields)))
     x_field = next(f for f in fields if f.text == x) if x is not None else fields[0]
-    y_keys = list(dict.fromkeys(y or [r.key for r in requirements] or DEFAULT_Y))
+    y_keys = list(dict.fromkeys(y or [r.key for r in requirements] or default_y))
     plan = SweepPlan(folder, base_scene.name, work, base, fields, grid, requirements, x_field, y_keys)
     for k in range(len(grid)):
         try:

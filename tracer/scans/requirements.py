@@ -14,7 +14,7 @@ from ..products.report import REPORT_SECTIONS
 from .fields import SweepArgumentError
 
 #: The parts of a report whose numeric leaves are a run's figures (sweep.csv's columns), in order.
-FIGURES = ("hud", "luminance", "adaptation_luminance", "noise", "rays", "seconds", "efficiency")
+FIGURES = ("hud", "optics", "luminance", "adaptation_luminance", "noise", "rays", "seconds", "efficiency")
 
 
 def numeric_leaves(value, prefix: str) -> dict[str, int | float]:
@@ -43,27 +43,40 @@ def run_figures(report: dict) -> dict[str, int | float]:
 
 
 # -- requirements -------------------------------------------------------------------------------------
-def check_report_key(argument: str, steps) -> None:
+def check_report_key(argument: str, steps, optics_only: bool = False) -> None:
     """A report key's first name must be a section of every report (tracer.products.report.REPORT_SECTIONS), so
-    that a mistyped key is refused before the runs rather than found missing in each. (What lies below
-    a section depends on the scene and the method: a run whose report lacks it fails the requirement.)
-    Raises :class:`SweepArgumentError`."""
+    that a mistyped key is refused before the runs rather than found missing in each; below ``optics``,
+    ``design_eye`` and ``eyebox`` must name a metric of the optical analysis
+    (tracer.analysis.optics.REQUIREMENT_KEYS). ``optics_only`` (a sweep of the optical analysis alone):
+    the key must lie in ``optics``. (What lies below a section depends on the scene and the method: a
+    run whose report lacks it fails the requirement.) Raises :class:`SweepArgumentError`."""
+    from ..analysis.optics import OpticsError, check_metric
+
     name = steps[0][1]
+    if optics_only and name != "optics":
+        raise SweepArgumentError(argument, "a sweep of the optical analysis (--optics) reads optics.* only "
+                                           "(optics.design_eye.ghost_separation_arcmin)")
     if name not in REPORT_SECTIONS:
         near = difflib.get_close_matches(name, REPORT_SECTIONS, n=1)
         hint = f"did you mean {near[0]!r}? " if near else ""
         raise SweepArgumentError(argument, f"{name!r} is not a section of a run's report.json ({hint}the sections "
                                            f"are: {', '.join(REPORT_SECTIONS)})")
+    names = [arg for _, arg in steps[1:]]
+    if name == "optics" and names and names[0] in ("design_eye", "eyebox"):
+        try:
+            check_metric(names, name)
+        except OpticsError as e:
+            raise SweepArgumentError(argument, str(e)) from None
 
 
-def parse_requirement(text: str) -> Requirement:
-    """``"KEY OP VALUE"`` (spaces optional) as a :class:`Requirement` on a run's report. Raises
-    :class:`SweepArgumentError`."""
+def parse_requirement(text: str, optics_only: bool = False) -> Requirement:
+    """``"KEY OP VALUE"`` (spaces optional) as a :class:`Requirement` on a run's report
+    (:func:`check_report_key`). Raises :class:`SweepArgumentError`."""
     argument = f"--require {text}"
     try:
         req = parse_text(text)
     except ValueError as e:
         raise SweepArgumentError(argument, str(e).replace("(hud.contrast_ratio)", "into the report "
                                                           "(hud.contrast_ratio)")) from None
-    check_report_key(argument, req.steps)
+    check_report_key(argument, req.steps, optics_only)
     return req

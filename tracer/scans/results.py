@@ -43,6 +43,9 @@ class Run:
 
     @property
     def found_light(self) -> bool:
+        """The render found light; a run of the optical analysis, that it found the image."""
+        if self.report["method"] == "optics":
+            return "error" not in self.report["optics"]
         return self.report["paths_found_light"] > 0
 
 
@@ -347,9 +350,13 @@ def sweep_chart(result: SweepResult) -> tuple[np.ndarray, dict]:
     xs = {r.index: float(r.values[xi]) for r in result.runs}
     x = {"field": plan.x.text, "unit": field_unit(plan.x.steps), "values": xs,
          "log": plan.x.log or charts.is_log(list(xs.values()) or [1.0])}
-    budget = f"{result.budget['rays']:,} rays" if result.budget["rays"] else f"{result.budget['seconds']:g} s"
-    caption = [f"{plan.scene_name}: sweep of {len(plan.grid)} runs, {result.method}, {budget} per run, seed "
-               f"{result.seed}" + (f", stopped after {len(result.runs)}" if result.partial else ""),
+    if result.method == "optics":
+        how = "the optical analysis"
+    else:
+        budget = f"{result.budget['rays']:,} rays" if result.budget["rays"] else f"{result.budget['seconds']:g} s"
+        how = f"{result.method}, {budget} per run, seed {result.seed}"
+    caption = [f"{plan.scene_name}: sweep of {len(plan.grid)} runs, {how}"
+               + (f", stopped after {len(result.runs)}" if result.partial else ""),
                result.describe()]
     rgb, geometry = charts.sweep_chart(panels, x, series, caption)
     return rgb, geometry | {"x_field": plan.x.text, "series": [s["label"] for s in series]}

@@ -51,6 +51,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import time
 import uuid
 from pathlib import Path
 
@@ -80,6 +81,36 @@ def open_outputs(out_dir, scene=None) -> OutputSet:
     return outputs
 
 
+def optics_run(scene, folder: Path) -> dict:
+    """The optical analysis of one grid point (``method`` "optics"): optics.json, optics.csv and its pictures
+    (tracer.products.optics) and a report.json holding its ``optics`` block (report_block, or {"error"}
+    where the scene shows no image) written into ``folder``; returns that report."""
+    from .. import __version__
+    from ..analysis.optics import OpticsError, analyse, report_block
+    from ..products import optics as products
+    from ..transport.sequential import ChainError
+
+    t0 = time.perf_counter()
+    try:
+        doc = analyse(scene, compare_mesh=False)
+        block, files = products.clean(report_block(doc)), products.output_files(doc)
+    except (OpticsError, ChainError) as e:
+        block, files = {"error": str(e)}, []
+    report = {"run_id": uuid.uuid4().hex, "tracer": f"hud-tracer {__version__}",
+              "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash}, "method": "optics",
+              "partial": False, "seconds": time.perf_counter() - t0, "optics": block,
+              "warnings": [block["error"]] if "error" in block else []}
+    text = finite_json(report)
+    outputs = OutputSet(folder, (*products.OUTPUT_NAMES, "report.json")).open()
+    try:
+        outputs.commit([*files, OutputFile("report.json", lambda p: p.write_text(text),
+                                           lambda p: json.loads(p.read_text()))])
+        outputs.keep()
+    finally:
+        outputs.close()
+    return report
+
+
 def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSet, workers: int = 1,
               batch_size: int | None = None, progress=None, should_stop=None, on_run=None) -> SweepResult:
     """Render every grid point of ``plan`` with ``method``, ``budget`` (tracer.methods.Budget, per run)
@@ -87,7 +118,8 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
     of ``outputs`` (:func:`open_outputs`; see the module docstring). ``progress(fraction, message)``
     follows the whole sweep; ``should_stop()`` true stops the current run as a render stops (its
     batches so far, marked partial) and starts no other: what was done is written, marked partial.
-    ``on_run(result, run)`` is called after each run.
+    ``on_run(result, run)`` is called after each run. ``method`` "optics" runs the optical analysis
+    (:func:`optics_run`) in place of a render.
 
     Raises :class:`~tracer.products.outputs.OutputWriteError` if writing fails (the folder keeps its earlier
     sweep); KeyboardInterrupt (a second Ctrl-C) leaves the folder as it was."""
@@ -95,7 +127,8 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
     staging = folder / f"{STAGING_PREFIX}runs-{uuid.uuid4().hex}"
     staging.mkdir()
     try:
-        result = SweepResult(plan, method, seed, {"rays": budget.rays, "seconds": budget.seconds}, workers,
+        result = SweepResult(plan, method, seed, {"rays": None, "seconds": None} if budget is None else
+                             {"rays": budget.rays, "seconds": budget.seconds}, workers,
                              batch_size)
         n = len(plan.grid)
         for k in range(n):
@@ -103,6 +136,14 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
                 result.stopped = True
                 break
             scene = plan.load(k)
+            if method == "optics":
+                if progress is not None:
+                    progress(k / n, f"run {k} ({k + 1} of {n}): optical analysis")
+                run = Run(k, plan.grid[k], optics_run(scene, staging / RUNS / str(k)))
+                result.runs.append(run)
+                if on_run is not None:
+                    on_run(result, run)
+                continue
             try:
                 report, rendered = render_scene(scene, method, budget, seed, staging / RUNS / str(k),
                                                 progress=_run_progress(progress, k, n), should_stop=should_stop,

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.units import luminance3
-from ..core.vec import dot, take
-from ..optics.bsdf import RADIANCE
+from ..core.vec import F32, dot, take
+from ..optics.bsdf import RADIANCE, TRANSMISSION
 
 
 class ChainError(ValueError):
@@ -88,13 +88,22 @@ class Landing:
 
 
 def follow(world, chain: Chain, plane: Plane, o: np.ndarray, d: np.ndarray) -> Landing:
-    """Follow rays from ``o`` (3, n) mm along unit ``d`` (3, n) through ``chain`` to ``plane``."""
+    """Follow rays from ``o`` (3, n) mm along unit ``d`` (3, n) through ``chain`` to ``plane``.
+
+    The factor is the chain's luminance factor for light leaving the PGU: the branches' weights, and in
+    a world that polarises (``world.polar``) the s and p channels followed as the renders follow them
+    (the eye's row vector through each interaction's Mueller matrix, tracer.optics.polar), ending
+    with the PGU's own polarisation (an emitter's, or an LCD's output polariser) where the ray meets it."""
     accel = world.accel
+    polar = world.polar
     n = o.shape[1]
     o = np.asarray(o, dtype=np.float64)
     d = np.asarray(d, dtype=np.float64)
-    idx = np.arange(n)  # the rays still on the chain, and their weights
-    fac = np.ones(n)
+    idx = np.arange(n)  # the rays still on the chain
+    beta = np.ones((3, n), F32)
+    extra = None
+    if polar is not None:
+        beta, extra = polar.start_camera(beta, d.astype(F32))
     for slot, label in chain.steps:
         hits = accel.intersect(o, d)  # float64 directions: the hit and the branch to float64 precision
         on = np.flatnonzero((hits.face >= 0) & (take(accel.face_slot, np.maximum(hits.face, 0)) == slot))
@@ -105,14 +114,24 @@ def follow(world, chain: Chain, plane: Plane, o: np.ndarray, d: np.ndarray) -> L
         lobe = [lb for lb in mat.lobes(it, RADIANCE) if lb[3] == label]
         if not lobe:
             raise ChainError(f"{world.scene.objects[slot].name}:{label}: its material has no branch {label!r}")
-        wo, weight = lobe[0][0], np.asarray(lobe[0][1], dtype=np.float64)
-        w = luminance3(np.broadcast_to(weight, (3, len(on)))) if weight.shape[0] == 3 else \
-            np.broadcast_to(weight.reshape(-1), (len(on),))
-        go = np.flatnonzero(w > 0)  # a refraction under total internal reflection carries nothing
+        wo, weight, flags = lobe[0][0], np.asarray(lobe[0][1], dtype=np.float64), lobe[0][2]
+        weight3 = np.broadcast_to(weight, (3, len(on))) if weight.shape[0] == 3 else \
+            np.broadcast_to(weight.reshape(-1), (3, len(on)))
+        b = take(beta, on)
+        if polar is not None:
+            sub = {k: take(v, on) for k, v in extra.items()}
+            b, stokes, frame = polar.scatter(b, sub, it, mat, wo, weight3.astype(F32),
+                                             np.full(len(on), flags, np.int8), False)
+            extra = {"stokes": stokes, "frame": frame}
+        else:
+            b = b * weight3
+        go = np.flatnonzero(luminance3(weight3) > 0)  # a refraction under total internal reflection carries nothing
         wo = take(wo, go).astype(np.float64)
         o = accel.spawn(take(p, go), take(it.ng, go), wo, take(it.offset, go))
         d = wo / np.sqrt(dot(wo, wo))
-        idx, fac = idx[on[go]], fac[on[go]] * w[go]
+        idx, beta = idx[on[go]], take(b, go)
+        if polar is not None:
+            extra = {k: take(v, go) for k, v in extra.items()}
     # The last leg: the PGU's plane, and whether anything lies before it.
     xy = np.full((2, n), np.nan)
     ok = np.zeros(n, bool)
@@ -123,13 +142,43 @@ def follow(world, chain: Chain, plane: Plane, o: np.ndarray, d: np.ndarray) -> L
     t = ((plane.centre[:, None] - o) * plane.normal[:, None]).sum(axis=0) / np.where(denom != 0, denom, np.nan)
     front = np.flatnonzero(np.isfinite(t) & (t > 0))
     if len(front):
-        o, d, t, idx, fac = take(o, front), take(d, front), t[front], idx[front], fac[front]
+        o, d, t, idx, beta = take(o, front), take(d, front), t[front], idx[front], take(beta, front)
         hits = accel.intersect(o, d)
         hit_slot = take(accel.face_slot, np.maximum(hits.face, 0))
         margin = 1e-3 + 1e-6 * t
         vignetted[idx] = (hits.face >= 0) & (hits.t < t - margin) & (hit_slot != chain.pgu)
+        if polar is not None:
+            extra = {k: take(v, front) for k, v in extra.items()}
+            beta = _at_pgu(world, chain.pgu, beta, extra, o, d, hits, hit_slot)
         xy[:, idx] = plane.local(o + t * d)
         ok[idx] = True
-        factor[idx] = fac
+        factor[idx] = luminance3(beta)
         direction[:, idx] = d
     return Landing(xy, ok, vignetted, factor, direction)
+
+
+def _at_pgu(world, pgu: int, beta: np.ndarray, extra: dict, o: np.ndarray, d: np.ndarray, hits, hit_slot):
+    """The eye's row (``beta``, ``extra``) applied to the light the PGU sends along the rays that meet
+    it: an emitter's polarisation, or an LCD's output polariser (its transmitted branch's Mueller matrix,
+    without the slide's modulation)."""
+    polar = world.polar
+    mat = world.materials[world.slot_material[pgu]]
+    obj = world.scene.objects[pgu]
+    on = np.flatnonzero((hits.face >= 0) & (hit_slot == pgu))
+    if len(on) == 0:
+        return beta
+    beta = beta.copy()
+    b, sub = take(beta, on), {k: take(v, on) for k, v in extra.items()}
+    d_on = take(d, on)
+    if obj.emission is not None:
+        beta[:, on] = polar.emitted(b, sub, d_on.astype(F32), np.full(len(on), pgu))
+        return beta
+    p = take(o, on) + hits.t[on] * d_on
+    it = world.interaction(hits.face[on], p, d_on, material=mat)
+    lobe = [lb for lb in mat.lobes(it, RADIANCE) if lb[2] & TRANSMISSION]
+    if not mat.delta or not lobe:
+        return beta
+    wo, flags = lobe[0][0], lobe[0][2]
+    beta[:, on], _, _ = polar.scatter(b, sub, it, mat, wo, np.ones((3, len(on)), F32),
+                                      np.full(len(on), flags, np.int8), False)
+    return beta
