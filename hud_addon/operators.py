@@ -1,23 +1,30 @@
 """Operators: add a preset, export the scene folder, show sampled light paths, show the last render's
-false-colour view, sweep the eyebox."""
+false-colour view, sweep the eyebox, run the optical analysis."""
 
 from __future__ import annotations
 
+import json
 import tempfile
 from pathlib import Path
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
 from ..presets import PRESETS
+from ..tracer.analysis.optics import OpticsError, analyse
 from ..tracer.core.errors import SceneError, TracerError
 from ..tracer.methods import INTEGRATORS
+from ..tracer.products.optics import OUTPUT_NAMES as OPTICS_FILES
+from ..tracer.products.optics import output_files as optics_files
+from ..tracer.products.optics import readouts as optics_readouts
 from ..tracer.products.outputs import OutputSet
 from ..tracer.scans.eyebox import OUTPUT_NAMES as EYEBOX_FILES
 from ..tracer.scans.eyebox import FieldNotFound, ScanArgumentError, eyebox_scan
 from ..tracer.scans.eyebox import output_files as eyebox_files
 from ..tracer.scene import load_scene
+from ..tracer.scene.windshield import windshield_mesh
+from ..tracer.transport.sequential import ChainError
 from ..tracer.transport.world import World
 from . import engine
 from .build import build_scene
@@ -28,6 +35,11 @@ from .units import unit_mm
 #: The last eyebox sweep of each scene by name: its summary (tracer.scans.eyebox.EyeboxResult.summary), the
 #: grid of offsets inside the eyebox and the folder it was written to; the HUD Readouts panel shows it.
 EYEBOX: dict[str, dict] = {}
+#: The last optical analysis of each scene by name: its readouts (tracer.products.optics.readouts), its
+#: summary and the folder it was written to; the HUD Optics panel shows it.
+OPTICS: dict[str, dict] = {}
+#: The pictures of the optical analysis, the first shown in the Image Editor.
+OPTICS_PICTURES = ("optics-distortion.png", "optics-eyebox.png", "optics-vid.png")
 
 
 def _preset_items(self, context):
@@ -64,6 +76,64 @@ def unsaved_relative(folder: str, what: str) -> str | None:
     if folder.startswith("//") and not bpy.data.filepath:
         return f"{what}: the folder is relative to the .blend, which is not saved: save it or choose an absolute folder"
     return None
+
+
+class HUD_OT_add_windshield(bpy.types.Operator):
+    """Add a windshield made from its parameters at the 3D cursor: a closed glass shell (flat, wedged or
+    curved) with its two exact surfaces, its inner surface facing the object's +Z (turn it toward the
+    driver), the glass behind it (scene.json objects[].windshield; docs/user/optics.md)"""
+
+    bl_idname = "hud.add_windshield"
+    bl_label = "Add Windshield"
+    bl_options = {"REGISTER", "UNDO"}
+
+    size_mm: FloatVectorProperty(name="Size", size=2, default=(1400.0, 800.0), min=1.0, max=5000.0,
+                                 description="Width (x) and height (y) of the inner surface's outline, mm")
+    thickness_mm: FloatProperty(name="Thickness", default=4.76, min=0.01, max=100.0,
+                                description="Thickness of the glass at the object's origin, mm")
+    wedge_mrad: FloatProperty(name="Wedge", default=0.0, min=-50.0, max=50.0,
+                              description="Angle between the outer and the inner surface, mrad (a few tenths fuse "
+                                          "a HUD's ghost)")
+    wedge_direction_deg: FloatProperty(name="Wedge direction", default=90.0, min=-360.0, max=360.0,
+                                       description="Direction the glass thickens in, degrees from +X toward +Y "
+                                                   "(90: toward the top)")
+    radius_x_mm: FloatProperty(name="Radius across", default=0.0, min=-1e7, max=1e7,
+                               description="Inner radius in the X-Z section, mm, positive concave toward +Z "
+                                           "(the driver); 0 flat")
+    radius_y_mm: FloatProperty(name="Radius up", default=0.0, min=-1e7, max=1e7,
+                               description="Inner radius in the Y-Z section, mm; 0 flat")
+    ior: FloatProperty(name="IOR", default=1.52, min=1.0, max=4.0, description="The glass's refractive index")
+
+    def execute(self, context):
+        p = {"size_mm": list(self.size_mm), "thickness_mm": self.thickness_mm, "depth_mm": 0.0,
+             "wedge_mrad": self.wedge_mrad, "wedge_direction_deg": self.wedge_direction_deg,
+             "radius_x_mm": self.radius_x_mm, "radius_y_mm": self.radius_y_mm, "cells": None}
+        least = 0.5 * max(p["size_mm"])
+        for key in ("radius_x_mm", "radius_y_mm"):
+            if 0 < abs(p[key]) < least:
+                self.report({"ERROR"}, f"Add Windshield: a radius must be 0 (flat) or at least half the size "
+                                       f"({least:g} mm)")
+                return {"CANCELLED"}
+        try:
+            v, f, surfaces = windshield_mesh(p)
+        except ValueError as e:
+            self.report({"ERROR"}, f"Add Windshield: {e}")
+            return {"CANCELLED"}
+        mm = unit_mm(context.scene)
+        mesh = bpy.data.meshes.new("windshield")
+        mesh.from_pydata((v / mm).tolist(), [], f.tolist())
+        mesh.update()
+        obj = bpy.data.objects.new("windshield", mesh)
+        obj.location = context.scene.cursor.location
+        context.collection.objects.link(obj)
+        obj.hud.role, obj.hud.ior = "dielectric", self.ior
+        obj.hud.surfaces = json.dumps(surfaces)
+        for o in context.selected_objects:
+            o.select_set(False)
+        obj.select_set(True)
+        context.view_layer.objects.active = obj
+        self.report({"INFO"}, f"windshield: {len(f)} triangles, {len(surfaces)} exact surfaces")
+        return {"FINISHED"}
 
 
 class HUD_OT_export_scene(bpy.types.Operator):
@@ -241,7 +311,63 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (HUD_OT_add_preset, HUD_OT_export_scene, HUD_OT_show_light_paths, HUD_OT_show_false_colour,
-           HUD_OT_eyebox_sweep)
+class HUD_OT_optical_analysis(bpy.types.Operator):
+    """Trace the optical analysis of the scene as it would be exported: virtual image distance, distortion,
+    ghost separation and binocular disparity from the camera (the design eye point) and over the eyebox,
+    through the specular chain from the camera to the LCD. Writes optics.json, optics.csv and three
+    pictures, and opens the distortion grid in the Image Editor"""
+
+    bl_idname = "hud.optical_analysis"
+    bl_label = "Optical Analysis"
+
+    def execute(self, context):
+        scene = context.scene
+        s = scene.hud
+        folder = Path(bpy.path.abspath(s.optics_folder))
+        if (message := unsaved_relative(s.optics_folder, "Optical Analysis")) is not None:
+            self.report({"ERROR"}, message)
+            return {"CANCELLED"}
+        OPTICS.pop(scene.name, None)
+        try:
+            with tempfile.TemporaryDirectory(prefix="hud-optics-") as tmp:
+                exported = export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene")
+                try:
+                    loaded = load_scene(exported)
+                except SceneError as e:
+                    raise ValueError(blender_terms(e, exported, scene)) from None
+                outputs = OutputSet(folder, OPTICS_FILES).open()  # checked and locked before the first ray
+                try:
+                    doc = analyse(loaded)
+                    outputs.commit(optics_files(doc))
+                    outputs.keep()
+                finally:
+                    outputs.close()
+        except (OpticsError, ChainError) as e:
+            self.report({"ERROR"}, f"Optical Analysis: {e}".replace("aim the eye", "aim the camera"))
+            return {"CANCELLED"}
+        except (TracerError, ValueError, OSError) as e:
+            self.report({"ERROR"}, f"Optical Analysis: {e}")
+            return {"CANCELLED"}
+        OPTICS[scene.name] = {"rows": optics_readouts(doc), "summary": doc["summary"], "folder": str(folder),
+                              "requirements_met": doc["requirements_met"]}
+        images = []
+        for name in OPTICS_PICTURES:
+            image = bpy.data.images.load(str(folder / name), check_existing=True)
+            image.reload()
+            images.append(image)
+        screen = getattr(context, "screen", None)
+        for area in (screen.areas if screen is not None else []):
+            if area.type == "IMAGE_EDITOR":
+                area.spaces.active.image = images[0]
+                break
+        d = doc["summary"]["design_eye"]
+        self.report({"INFO"} if doc["requirements_met"] else {"WARNING"},
+                    f"VID {d['vid_mm']:.0f} mm, ghost {d.get('ghost_separation_centre_arcmin') or 0:.2f} arcmin"
+                    + ("" if doc["requirements_met"] else "; a requirement is not met") + f"; written to {folder}")
+        return {"FINISHED"}
+
+
+CLASSES = (HUD_OT_add_preset, HUD_OT_add_windshield, HUD_OT_export_scene, HUD_OT_show_light_paths,
+           HUD_OT_show_false_colour, HUD_OT_eyebox_sweep, HUD_OT_optical_analysis)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -1,5 +1,6 @@
 """Panels, shown only when the HUD Tracer engine is active."""
 
+import json
 import math
 
 import bpy
@@ -57,6 +58,7 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         sub.prop(r, "threads", text="")
         row = col.row()
         row.operator("hud.add_preset")
+        row.operator("hud.add_windshield")
         row.operator("hud.export_scene")
         col.operator("hud.show_light_paths")
 
@@ -116,6 +118,44 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
             box.label(text=f"Written to {sweep['folder']} (chart: image eyebox.png)")
 
 
+def _surface_kinds(text: str) -> str:
+    """The shapes of an object's Exact surfaces (its JSON text), or what is wrong with the text."""
+    try:
+        blocks = json.loads(text)
+    except json.JSONDecodeError:
+        return "not valid JSON (the export says where)"
+    if not isinstance(blocks, list) or not all(isinstance(b, dict) for b in blocks):
+        return "not a list of surface blocks"
+    return ", ".join(str(b.get("type", "?")) for b in blocks)
+
+
+class HUD_PT_optics(_HudPanel, bpy.types.Panel):
+    """The optical analysis: where the image is and how good it is (docs/user/optics.md)."""
+
+    bl_label = "HUD Optics"
+    bl_context = "render"
+
+    def draw(self, context):
+        scene = context.scene
+        s = scene.hud
+        col = self.layout.column()
+        for name in ("optics_eyebox_mm_shown", "optics_ipd_mm_shown", "optics_field_grid", "optics_eye_grid",
+                     "optics_folder"):
+            col.prop(s, name)
+        if s.optics_target:
+            col.label(text=f"Target: {s.optics_target}"[:120])
+        col.operator("hud.optical_analysis", icon="MOD_UVPROJECT")
+        result = operators.OPTICS.get(scene.name)
+        if result is None:
+            return
+        grid = col.grid_flow(row_major=True, columns=2, even_columns=False)
+        for label, text in result["rows"]:
+            grid.label(text=label)
+            grid.label(text=text[:120], icon="NONE" if "NOT met" not in text else "ERROR")
+        col.label(text=f"Written to {result['folder']} (images optics-distortion.png, optics-eyebox.png, "
+                       "optics-vid.png)")
+
+
 class HUD_PT_object(_HudPanel, bpy.types.Panel):
     bl_label = "HUD Optical Role"
     bl_context = "object"
@@ -136,6 +176,8 @@ class HUD_PT_object(_HudPanel, bpy.types.Panel):
             _draw_aim(col, h, "")
             _draw_aim(col, h, "light_")
         col.prop(h, "smooth_normals")
+        if h.surfaces:
+            col.label(text=f"Exact surfaces: {_surface_kinds(h.surfaces)}", icon="SPHERECURVE")
         col.prop(h, "emits")
         if h.emits:
             box = col.box()
@@ -228,7 +270,7 @@ class HUD_PT_sun(_HudPanel, bpy.types.Panel):
         col.label(text="Toward the sun: the light's +Z (it shines along -Z)")
 
 
-CLASSES = (HUD_PT_render, HUD_PT_readouts, HUD_PT_object, HUD_PT_eye, HUD_PT_world, HUD_PT_sun)
+CLASSES = (HUD_PT_render, HUD_PT_readouts, HUD_PT_optics, HUD_PT_object, HUD_PT_eye, HUD_PT_world, HUD_PT_sun)
 
 #: Blender's own panels that apply to HUD Tracer renders: resolution, frame range, output and colour
 #: management, the camera's lens and display, the mesh's UV maps (an LCD slide needs them) and Metadata
