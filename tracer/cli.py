@@ -195,10 +195,20 @@ def cmd_render(args) -> int:
             crowded = check_workers(args.workers, scene.eye.resolution)
             if crowded:
                 print(f"warning: {crowded}", file=sys.stderr)
-            report, result = render_scene(scene, args.method, budget, args.seed, args.out, progress=bar,
-                                          should_stop=flag, batch_size=args.batch_size, workers=args.workers,
-                                          analyse=not args.no_analysis,
-                                          notice=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
+            sides = ("left", "right") if args.eye == "both" else (args.eye,)
+            for side in sides:
+                out = args.out if len(sides) == 1 else str(Path(args.out) / side)
+                report, result = render_scene(scene, args.method, budget, args.seed, out, progress=bar,
+                                              should_stop=flag, batch_size=args.batch_size, workers=args.workers,
+                                              analyse=not args.no_analysis, eye=side,
+                                              notice=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
+                if result.partial:
+                    break
+            if len(sides) == 2 and not result.partial:
+                from .products.render import side_by_side
+
+                side_by_side(Path(args.out) / "left" / "preview.png", Path(args.out) / "right" / "preview.png",
+                             Path(args.out) / "both.png")
     except StoppedBeforeFirstBatch as e:
         if bar:
             bar.close()
@@ -580,6 +590,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--rays", type=ray_count, help="budget in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
     r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--eye", choices=("centre", "left", "right", "both"), default="centre",
+                   help="the eye that sees: the scene's own (centre, the design eye point), or the left or right eye "
+                        "of a binocular pair, IPD / 2 to that side (target.ipd_mm, default 65 mm); both: each into "
+                        "OUT/left and OUT/right, and their previews side by side in OUT/both.png")
     r.add_argument("--out", required=True, help="output folder (image.exr, preview.png, report.json)")
     r.add_argument("--batch-size", type=int, default=None,
                    help="paths per batch, 1024 to 2^24 (default: 131072 with --rays; with --seconds sized so that a "

@@ -32,9 +32,11 @@ from ..methods import INTEGRATORS, Budget, RenderResult
 from ..optics.pupil import pupil_diameter_mm
 from ..runtime.parallel import render_parallel
 from ..scene import Scene, load_scene
+from ..scene.binocular import eye_for
+from ..transport.eye import ThinLensEye
 from ..transport.world import World
 from .optics import clean
-from .outputs import OutputFile, OutputSet
+from .outputs import OutputFile, OutputSet, png_file, write_as_set
 from .report import build_report, finite_json
 from .tonemap import adaptation_luminance, tonemap_ward
 
@@ -212,7 +214,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
 
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
                  progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
-                 workers: int = 1, notice=None):
+                 workers: int = 1, notice=None, eye: str = "centre"):
     """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
     (report dict, RenderResult). ``notice(message)``, where given, hears the warnings that can be
     given before the first ray (:func:`aim_preflight`; the report repeats them from its own analysis)
@@ -225,12 +227,14 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     share a run id (``report["run_id"]``, the EXR attribute ``hud:run_id``). A partial render (stopped
     through ``should_stop``) skips the brightness-theorem analysis, so that it ends promptly; one stopped
     before its first batch ended has nothing to write and raises
-    :class:`~tracer.core.errors.StoppedBeforeFirstBatch` (the folder keeps its earlier outputs)."""
+    :class:`~tracer.core.errors.StoppedBeforeFirstBatch` (the folder keeps its earlier outputs). ``eye``:
+    "left" or "right" renders what that eye of a binocular pair sees (tracer.scene.binocular; the
+    report's image block says which)."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
     outputs = OutputSet(out_dir, OUTPUT_NAMES, scene_root=scene.root).open()
     try:
-        world = World(scene)
+        world = World(scene, None if eye == "centre" else ThinLensEye(eye_for(scene, eye)))
         integrator = INTEGRATORS[method](world, seed, batch_size)
         if notice is not None:
             for w in aim_preflight(world, method, integrator.renders_environment):
@@ -238,11 +242,24 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
             integrator.notice = notice
         integrator, result = run_render(integrator, budget, workers, progress, should_stop)
         products = render_products(integrator.world, integrator, result, budget, analyse)
+        if eye != "centre":
+            products.report["image"]["eye"] = {"side": eye, "position_mm": integrator.world.eye.position.tolist(),
+                                               "ipd_mm": float(scene.target.get("ipd_mm", 65.0))}
         outputs.commit(products.files())
         outputs.keep()
     finally:
         outputs.close()
     return products.report, result
+
+
+def side_by_side(left: Path, right: Path, out: Path) -> None:
+    """The two eyes' previews side by side (left eye on the left, a 4-pixel black gap) as one PNG,
+    written as a set of one (tracer.products.outputs.write_as_set)."""
+    a, b = (np.rint(read_image(p, linear=True) * 255.0).astype(np.uint8) for p in (left, right))
+    gap = np.zeros((a.shape[0], 4, 3), np.uint8)
+    rgb = np.concatenate([a[..., :3], gap, b[..., :3]], axis=1)
+    f = png_file(out.name, rgb)
+    write_as_set(out, f.write, f.check)
 
 
 def render_folder(scene_dir, method, budget, seed, out_dir, **kw):
