@@ -159,3 +159,28 @@ def test_pgu_usage_and_requirements_follow_the_target(tmp_path):
     usage = out["summary"]["design_eye"]["pgu_usage"]
     assert usage == pytest.approx(0.25, abs=0.03)
     assert out["target"]["distance_mm"] == {"value": 1200.0, "source": "given"}
+
+
+def test_a_laminate_images_its_ghost_as_a_plate_of_its_thickness(tmp_path):
+    """Glass 4.76 mm with a 0.76 mm PVB interlayer (n 1.48 inside n 1.52) 2 mm behind its inner surface:
+    the ghost comes off the outer surface through the PVB, within 2 % of the monolithic plate's (the
+    interlayer bends it by the index step only); the interfaces with the PVB reflect 1e-4 and make no
+    chain of their own worth imaging."""
+    from tests.support.scenes import edit_json
+
+    folder = imaging.plate(tmp_path / "l")
+    laminate = {"size_mm": [600.0, 600.0], "thickness_mm": 0.76, "depth_mm": 2.0}
+
+    def add_pvb(d):
+        glass = d["objects"][0]
+        d["objects"].insert(1, {"name": "pvb", "material": {"type": "dielectric", "ior": 1.48, "ior_outside": 1.52},
+                                "transform": glass["transform"], "windshield": laminate})
+
+    edit_json(folder, add_pvb)
+    analysis, out = _analyse(folder, eyebox=False)
+    assert analysis.chains.primary.text == "plate:reflect > panel"
+    assert analysis.chains.ghost.text == ("plate:refract > pvb:refract > pvb:refract > plate:reflect > pvb:refract > "
+                                          "pvb:refract > plate:refract > panel")
+    mono = _analyse(imaging.plate(tmp_path / "p"), eyebox=False)[1]
+    sep = out["summary"]["design_eye"]["ghost_separation_centre_arcmin"]
+    assert sep == pytest.approx(mono["summary"]["design_eye"]["ghost_separation_centre_arcmin"], rel=0.02)

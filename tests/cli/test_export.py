@@ -16,11 +16,12 @@ def test_presets_listed_and_exported(tmp_path):
     names = [line.split()[0] for line in out.stdout.splitlines()]
     assert names == ["hud-direct", "hud-screen", "hud-screen-ideal-lcd", "hud-direct-condenser", "hud-screen-day",
                      "hud-screen-night", "hud-direct-env", "hud-direct-s", "hud-direct-s-sunglasses",
-                     "hud-direct-film-sunglasses", "analytic-mirror", "analytic-disk", "analytic-furnace"]
+                     "hud-direct-film-sunglasses", "hud-direct-wedge", "hud-direct-curved", "analytic-mirror",
+                     "analytic-disk", "analytic-furnace"]
     lines = out.stdout.splitlines()
     columns = {len(line) - len(line[len(name):].lstrip()) for name, line in zip(names, lines, strict=True)}
     assert len(columns) == 1, "every summary starts in one column"
-    for name in ("hud-direct", "hud-screen", "hud-direct-condenser"):
+    for name in ("hud-direct", "hud-screen", "hud-direct-condenser", "hud-direct-wedge"):
         assert hud_trace("export", name, tmp_path / name).returncode == 0
         assert (tmp_path / name / "scene.json").is_file() and (tmp_path / name / "textures" / "slide.png").is_file()
 

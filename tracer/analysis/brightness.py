@@ -248,7 +248,8 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             "path": ghost["path"],
             "predicted_cd_m2": g_mean,
             "ratio_to_symbol": g_mean / m_mean if m_mean > 0 else None,
-            "offset_px": [-dx * res["stride"], -dy * res["stride"]],
+            # the ghost's place from the symbols', [right, up]: _shift rolls the ghost onto them, rows run down
+            "offset_px": [-dx * res["stride"], dy * res["stride"]],
             "offset_mrad": float(math.hypot(dx, dy) * res["stride"] * px_mrad),
         }
     return out

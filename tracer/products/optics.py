@@ -235,7 +235,7 @@ def eyebox_chart(doc: dict) -> tuple[np.ndarray, dict]:
                        [p["convergence_max_mrad"] for p in pairs], True, None))
         panels.append(("dipvergence of the pair centred here", "mrad", poff,
                        [p["dipvergence_max_mrad"] for p in pairs], True, None))
-    rects = [(0.07, 0.57, 0.38, 0.33), (0.57, 0.57, 0.38, 0.33), (0.07, 0.08, 0.38, 0.33), (0.57, 0.08, 0.38, 0.33)]
+    rects = [(0.07, 0.57, 0.36, 0.33), (0.55, 0.57, 0.36, 0.33), (0.07, 0.08, 0.36, 0.33), (0.55, 0.08, 0.36, 0.33)]
     for (title, unit, off, values, signed, partial), rect in zip(panels, rects, strict=False):
         xs, ys, grid = _grid(values, off)
         boxes[title] = charts.box(_map(fig, rect, xs, ys, grid, title, unit, signed, partial))
