@@ -159,6 +159,10 @@ def test_pgu_usage_and_requirements_follow_the_target(tmp_path):
     usage = out["summary"]["design_eye"]["pgu_usage"]
     assert usage == pytest.approx(0.25, abs=0.03)
     assert out["target"]["distance_mm"] == {"value": 1200.0, "source": "given"}
+    s = out["summary"]["design_eye"]
+    assert s["vid_minus_target_mm"] == pytest.approx(s["vid_mm"] - 1200.0)
+    assert s["fov_h_minus_target_deg"] == pytest.approx(0.5 * s["fov_h_deg"], rel=0.01)
+    assert "look_down_minus_target_deg" not in s  # the target does not give it
 
 
 def test_a_laminate_images_its_ghost_as_a_plate_of_its_thickness(tmp_path):

@@ -86,6 +86,11 @@ DEFINITIONS = {
                                   "point, for an eye focused at the bundle's VID"),
     "pgu_usage": ("1", "Share of the PGU's active area whose image from the design eye point lies inside the "
                        "target field of view"),
+    "vid_minus_target_mm": ("mm", "VID minus the target distance (where the target gives it)"),
+    "look_down_minus_target_deg": ("deg", "Look-down angle minus the target's"),
+    "look_over_minus_target_deg": ("deg", "Look-over angle minus the target's"),
+    "fov_h_minus_target_deg": ("deg", "Horizontal field of view minus the target's"),
+    "fov_v_minus_target_deg": ("deg", "Vertical field of view minus the target's"),
 }
 
 #: The summary metrics judged against requirements and given to report.json and sweeps.
@@ -288,6 +293,13 @@ class Analysis:
         hv, xy = self._scan
         d2 = ((xy[:, :, None] - targets[:, None, :]) ** 2).sum(axis=0)
         return hv[:, np.argmin(d2, axis=0)]
+
+    def image_directions(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the design eye point sees PGU points ``points_mm`` (2, n; the PGU plane's coordinates,
+        :class:`PGU`): unit directions (3, n) of their primary images' chief rays (NaN where none
+        converges) and (n,) whether each converged."""
+        hv, ok = self._solve_dep(self.primary, np.asarray(points_mm, dtype=np.float64))
+        return np.where(ok, self.frame.direction(np.where(ok, hv, 0.0)), np.nan), ok
 
     def _solve_dep(self, imaging: Imaging, targets: np.ndarray, guess: np.ndarray | None = None):
         n = targets.shape[1]
@@ -516,6 +528,15 @@ class Analysis:
             "trapezoid_h_percent": float((width_top - width_bottom) / (0.5 * (width_top + width_bottom)) * 100),
             "trapezoid_v_percent": float((height_left - height_right) / (0.5 * (height_left + height_right)) * 100),
         }
+        # against the target, where it gives the figure
+        for key, target_key, measured in (("vid_minus_target_mm", "distance_mm", centre_vid),
+                                          ("look_down_minus_target_deg", "look_down_deg", summary["look_down_deg"]),
+                                          ("look_over_minus_target_deg", "look_over_deg", summary["look_over_deg"])):
+            if target_key in t:
+                summary[key] = measured - float(t[target_key])
+        if "fov_deg" in t:
+            summary["fov_h_minus_target_deg"] = summary["fov_h_deg"] - float(t["fov_deg"][0])
+            summary["fov_v_minus_target_deg"] = summary["fov_v_deg"] - float(t["fov_deg"][1])
         per_field = {
             "pgu_mm": field["targets"].T.tolist(), "azimuth_deg": np.degrees(hv[0, g]), "elevation_deg":
             np.degrees(hv[1, g]), "vid_mm": vid[g], "vid_tangential_mm": _distance(parts["v"][g]),
@@ -619,7 +640,9 @@ EYEBOX_KEYS = ("focus_variation_d", "dynamic_distortion_mrad", "vid_min_mm", "vi
                "ghost_separation_arcmin", "ghost_offset_v_arcmin", "convergence_mrad", "divergence_mrad",
                "dipvergence_mrad", "binocular_pairs")
 #: Further design-eye figures that optics.json's summary carries besides :data:`DESIGN_KEYS`.
-DESIGN_EXTRAS = ("vid_tangential_mm", "vid_sagittal_mm", "astigmatism_centre_d")
+DESIGN_EXTRAS = ("vid_tangential_mm", "vid_sagittal_mm", "astigmatism_centre_d", "vid_minus_target_mm",
+                 "look_down_minus_target_deg", "look_over_minus_target_deg", "fov_h_minus_target_deg",
+                 "fov_v_minus_target_deg")
 #: What a requirement's KEY may name: ``design_eye.KEY`` or ``eyebox.KEY``.
 REQUIREMENT_KEYS = {"design_eye": DESIGN_KEYS + DESIGN_EXTRAS, "eyebox": EYEBOX_KEYS}
 
