@@ -61,3 +61,18 @@ def test_eye_both_writes_two_sets_and_their_previews_side_by_side(tmp_path):
     both = read_image(tmp_path / "out" / "both.png")
     left = read_image(tmp_path / "out" / "left" / "preview.png")
     assert both.shape[1] == 2 * left.shape[1] + 4 and both.shape[0] == left.shape[0]
+
+
+def test_a_binocular_renders_optics_block_is_the_design_eye_points(tmp_path):
+    """--eye left renders from the left eye, but report.json's optics block analyses the scene's own eye
+    (the design eye point), as hud-trace optics does; image.eye says which eye rendered."""
+    from tracer.products.render import render_scene
+
+    folder = imaging.plane_mirror(tmp_path / "p", target={"eye_grid": [3, 1]})
+    scene = load_scene(folder)
+    report, _ = render_scene(scene, "backward", Budget(rays=100_000), 1, tmp_path / "left", eye="left")
+    assert report["image"]["eye"]["side"] == "left"
+    np.testing.assert_allclose(report["image"]["eye"]["position_mm"], [-32.5, 0.0, 0.0], atol=1e-9)
+    own = analyse(scene, spot=False, compare_mesh=False)["summary"]["design_eye"]
+    assert report["optics"]["design_eye"]["look_over_deg"] == pytest.approx(own["look_over_deg"], abs=1e-9)
+    assert report["optics"]["design_eye"]["vid_mm"] == pytest.approx(own["vid_mm"], rel=1e-9)

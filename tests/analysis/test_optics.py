@@ -142,14 +142,6 @@ def test_wedge_deviates_the_ghost(tmp_path, wedge_mrad):
     assert abs(s1["ghost_offset_h_arcmin"]) < 1e-3
 
 
-def test_an_eye_that_sees_no_image_is_told_where_to_look(tmp_path):
-    folder = imaging.plane_mirror(tmp_path / "p")
-    scene = load_scene(folder)
-    scene.eye.gaze = np.array([0.0, -1.0, 0.0])  # away from the mirror
-    with pytest.raises(OpticsError, match="aim the eye at the image"):
-        Analysis(World(scene))
-
-
 def test_pgu_usage_and_requirements_follow_the_target(tmp_path):
     """A target field of view half the image's: about a quarter of the PGU's area lies inside it."""
     folder = imaging.plane_mirror(tmp_path / "p", target={"fov_deg": [0.5 * math.degrees(2 * math.atan(0.03)),
@@ -188,3 +180,102 @@ def test_a_laminate_images_its_ghost_as_a_plate_of_its_thickness(tmp_path):
     mono = _analyse(imaging.plate(tmp_path / "p"), eyebox=False)[1]
     sep = out["summary"]["design_eye"]["ghost_separation_centre_arcmin"]
     assert sep == pytest.approx(mono["summary"]["design_eye"]["ghost_separation_centre_arcmin"], rel=0.02)
+
+
+def test_every_figure_of_optics_json_has_its_unit_and_definition(plane):
+    """The summary's, the field points', the eye points' and the pairs' keys are all in DEFINITIONS."""
+    from tracer.analysis.optics import DEFINITIONS
+
+    _, out = plane
+    keys = set(out["summary"]["design_eye"]) | set(out["summary"]["eyebox"])
+    for part in ("field_points", "eye_points", "pairs"):
+        keys |= {k for row in out[part] for k in row}
+    missing = sorted(k for k in keys if k not in DEFINITIONS)
+    assert not missing, missing
+
+
+def test_eye_points_find_the_field_points_the_design_eye_point_misses(tmp_path):
+    """hud-direct-wedge's eye moved 52 mm right: the design eye point sees 13 of 15 field points (the
+    mirror's edge), and says so; eye points to its left still find all 15 (they are not left without a
+    first guess)."""
+    from presets import PRESETS
+    from tests.support.scenes import edit_json
+
+    folder = PRESETS["hud-direct-wedge"].write(tmp_path / "w")
+    edit_json(folder, lambda d: d["eye"]["position"].__setitem__(0, d["eye"]["position"][0] + 52.0))
+    doc = analyse_doc(folder)
+    assert doc["summary"]["design_eye"]["field_points_seen"] == "13/15"
+    assert any("sees 13 of 15 field points" in w for w in doc["warnings"])
+    assert max(e["field_points_seen"] for e in doc["eye_points"]) == 15
+
+
+def analyse_doc(folder, **kw):
+    from tracer.analysis.optics import analyse
+
+    return analyse(load_scene(folder), compare_mesh=False, spot=False, **kw)
+
+
+BAD_TARGETS = {
+    "a metric's name mistyped": ({"requirements": ["design_eye.ghost_seperation_arcmin < 1"]},
+                                 "target.requirements[0]", "did you mean 'ghost_separation_arcmin'"),
+    "no such section": ({"requirements": ["design.vid_mm > 1"]}, "target.requirements[0]", "design_eye.METRIC"),
+    "a PGU that is not flat": ({"pgu": "mirror"}, "target.pgu", None),
+}
+
+
+@pytest.mark.parametrize("case", BAD_TARGETS)
+def test_bad_targets_are_refused_naming_scene_json_and_the_field(tmp_path, case):
+    from tests.support.scenes import edit_json
+    from tracer.core.errors import SceneError
+
+    target, field, words = BAD_TARGETS[case]
+    folder = imaging.sphere_off_axis(tmp_path / "s")
+    edit_json(folder, lambda d: d.__setitem__("target", target))
+    with pytest.raises(SceneError) as e:
+        analyse_doc(folder)
+    assert e.value.field == field and "scene.json" in str(e.value), str(e.value)
+    if words:
+        assert words in str(e.value)
+
+
+def test_an_eyebox_requirement_needs_the_eyebox(tmp_path):
+    from tests.support.scenes import edit_json
+    from tracer.core.errors import SceneError
+
+    folder = imaging.plane_mirror(tmp_path / "p")
+    edit_json(folder, lambda d: d["target"].update(requirements=["eyebox.dipvergence_mrad < 2"]))
+    with pytest.raises(SceneError, match="--no-eyebox"):
+        analyse_doc(folder, eyebox=False)
+    assert analyse_doc(folder)["requirements_met"]
+
+
+def test_a_gaze_straight_down_needs_the_vehicles_forward(tmp_path):
+    from tests.support.scenes import edit_json
+    from tracer.core.errors import SceneError
+
+    folder = imaging.plane_mirror(tmp_path / "p")
+    edit_json(folder, lambda d: d["eye"].update(gaze=[0.0, 0.0, -1.0], up=[0.0, 1.0, 0.0]))
+    with pytest.raises(SceneError) as e:
+        analyse_doc(folder)
+    assert e.value.field == "target.forward"
+
+
+def test_an_eye_that_sees_no_image_is_told_what_it_sees(tmp_path):
+    folder = imaging.plane_mirror(tmp_path / "p")
+    scene = load_scene(folder)
+    scene.eye.gaze = np.array([0.0, -1.0, 0.0])  # away from the mirror
+    with pytest.raises(OpticsError, match="aim the eye") as e:
+        Analysis(World(scene))
+    assert "sees" in str(e.value)
+
+
+def test_warnings_for_a_backward_forward_and_a_pair_wider_than_the_eyebox(tmp_path):
+    from tests.support.scenes import edit_json
+
+    folder = imaging.plane_mirror(tmp_path / "p", target={"forward": [0.0, -1.0, 0.0], "ipd_mm": 150.0,
+                                                          "eyebox_mm": [120.0, 40.0]})
+    doc = analyse_doc(folder)
+    text = " ".join(doc["warnings"])
+    assert "target.forward" in text and "no binocular pair fits" in text
+    edit_json(folder, lambda d: d.__setitem__("target", {}))
+    assert analyse_doc(folder)["warnings"] == []

@@ -35,6 +35,9 @@ EPS_PUPIL = 0.5
 #: The solver stops where every landing point is within this distance of its target, mm (0.1 um on the
 #: PGU: 1e-7 rad of image angle through a magnification of about 8 at 2.5 m).
 TOLERANCE_MM = 1e-4
+#: A solve that no step improves is kept within this distance of its target, mm (1 um on the PGU:
+#: 0.01 arcmin of image angle at hud-direct's magnification and VID).
+STUCK_MM = 10 * TOLERANCE_MM
 NEWTON_STEPS = 20
 HALVINGS = 8
 
@@ -143,10 +146,14 @@ class Imaging:
                 pending[idx[better]] = False
                 scale[idx[~better]] *= 0.5
             stuck = act[pending]  # no step helped: as close as this guess gets
-            ok[stuck] = ok[stuck] & (dist[stuck] <= 100 * TOLERANCE_MM)
+            ok[stuck] = ok[stuck] & (dist[stuck] <= STUCK_MM)
             done[stuck] = ok[stuck]
         dist = np.sqrt((err * err).sum(axis=0))
-        good = ok & (dist <= 100 * TOLERANCE_MM)
+        good = ok & (dist <= STUCK_MM)
+        # a chief ray that something else blocks before the PGU: the eye does not see that point
+        k = np.flatnonzero(good)
+        if len(k):
+            good[k[self.land(eyes[:, k], self.frame.direction(hv[:, k])).vignetted[:]]] = False
         hv[:, ~good] = np.nan
         return hv, good
 

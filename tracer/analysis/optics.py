@@ -25,9 +25,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import SceneError
 from ..optics.materials import LCD
 from ..transport.chains import specular_paths
 from ..transport.sequential import Chain, Plane, chain_from_events
@@ -59,7 +61,8 @@ DEFINITIONS = {
                                        "rectangular grid (least squares centre and H and V scales), at the design "
                                        "eye point"),
     "static_distortion_percent": ("%", "The same as % of the ideal grid's half-diagonal"),
-    "rotation_mrad": ("mrad", "Tilt of the middle row's images (least squares line), positive counter-clockwise"),
+    "rotation_mrad": ("mrad", "Tilt of the line through the images of the left and right edges' middles, positive "
+                              "counter-clockwise"),
     "smile_mrad": ("mrad", "Largest bow of a row: its middle image's elevation minus the mean of its two ends'"),
     "trapezoid_h_percent": ("%", "(top row width - bottom row width) / their mean"),
     "trapezoid_v_percent": ("%", "(left column height - right column height) / their mean"),
@@ -70,9 +73,13 @@ DEFINITIONS = {
                                  "sight in the horizontal minus that toward a point at the target distance along "
                                  "the pair's middle line of sight (positive: converge, nearer than the target; "
                                  "negative: diverge)"),
-    "dipvergence_mrad": ("mrad", "Vertical disparity: the left eye's elevation minus the right eye's"),
-    "vergence_angle_mrad": ("mrad", "The left eye's azimuth minus the right eye's (IPD / D for a point at distance D "
-                                    "straight ahead)"),
+    "divergence_mrad": ("mrad", "The largest negative convergence over the pairs and field points, as a positive "
+                                "number"),
+    "dipvergence_mrad": ("mrad", "Vertical disparity: the left eye's elevation minus the right eye's, in Helmholtz "
+                                 "angles (elevation atan2(d.up, d.forward) about the interocular axis: a real point "
+                                 "gives 0); the summary, the largest magnitude"),
+    "vergence_angle_mrad": ("mrad", "The left eye's Helmholtz azimuth asin(d.right) minus the right eye's "
+                                    "(2 atan(IPD / 2D) for a point at distance D straight ahead)"),
     "image_x_mrad": ("mrad", "A field point's image on the plane across the centre's line of sight (gnomonic: the "
                              "tangent of its angle from the centre, to the right); distortion is measured there"),
     "image_y_mrad": ("mrad", "The same, upward"),
@@ -80,8 +87,32 @@ DEFINITIONS = {
                                           "from the same eye point"),
     "ghost_offset_h_arcmin": ("arcmin", "Ghost azimuth minus primary azimuth (signed)"),
     "ghost_offset_v_arcmin": ("arcmin", "Ghost elevation minus primary elevation (signed)"),
-    "ghost_ratio": ("1", "The ghost chain's luminance factor over the primary's (product of the Fresnel R and T, "
-                         "unpolarised, and the mirrors' reflectances)"),
+    "ghost_ratio": ("1", "The ghost chain's luminance factor over the primary's at the centre: the Fresnel R and T "
+                         "and the mirrors' reflectances, s and p light followed apart as the renders follow them "
+                         "(tracer.optics.polar), with the PGU's own polarisation"),
+    "ghost_separation_centre_arcmin": ("arcmin", "The ghost separation of the PGU's centre"),
+    "vid_min_mm": ("mm", "The nearest field point's VID (over the eyebox: of any field point from any eye point)"),
+    "vid_max_mm": ("mm", "The furthest field point's VID"),
+    "astigmatism_centre_d": ("D", "The astigmatism of the PGU centre's bundle"),
+    "field_points_seen": ("1", "Field points whose chief ray converges onto the PGU unblocked (of those of the grid)"),
+    "eye_points_seeing_every_field_point": ("1", "Eye points from which every field point is seen (of the grid's)"),
+    "binocular_pairs": ("1", "Binocular pairs whose two eyes both lie in the eyebox"),
+    "pgu_mm": ("mm", "A field point on the PGU's plane, along its x and y"),
+    "azimuth_deg": ("deg", "A chief ray's azimuth, positive to the right of forward"),
+    "elevation_deg": ("deg", "A chief ray's elevation, positive up"),
+    "distortion_mrad": ("mrad", "A field point's distance from its place on the best rectangular grid"),
+    "distortion_h_mrad": ("mrad", "Its horizontal part (image minus ideal, to the right)"),
+    "distortion_v_mrad": ("mrad", "Its vertical part (up)"),
+    "ideal_x_mrad": ("mrad", "The field point's place on the best rectangular grid, to the right"),
+    "ideal_y_mrad": ("mrad", "The same, upward"),
+    "offset_mm": ("mm", "An eye point's offset from the design eye point [right, up]"),
+    "midpoint_mm": ("mm", "A binocular pair's midpoint offset from the design eye point [right, up]"),
+    "dynamic_distortion_max_mrad": ("mrad", "An eye point's largest dynamic distortion over the field points"),
+    "ghost_separation_max_arcmin": ("arcmin", "An eye point's largest ghost separation over the field points"),
+    "convergence_max_mrad": ("mrad", "A pair's convergence of largest magnitude over the field points (signed)"),
+    "dipvergence_max_mrad": ("mrad", "A pair's dipvergence of largest magnitude over the field points (signed)"),
+    "row": ("1", "A field point's row, from the image's top"),
+    "column": ("1", "A field point's column, from the image's left"),
     "spot_rms_arcmin": ("arcmin", "RMS radius of the spot of rays over the whole pupil, each solved onto the field "
                                   "point, for an eye focused at the bundle's VID"),
     "pgu_usage": ("1", "Share of the PGU's active area whose image from the design eye point lies inside the "
@@ -186,9 +217,14 @@ def find_chains(world, pgu: str | None = None, rays: int = 3000) -> Chains:
         key = (tuple(ev[0]), ev[1])
         groups[key] = groups.get(key, 0.0) + float(np.sum(p["factor"]))
     if not groups:
-        where = f"the PGU {pgu}" if pgu else "an LCD, a scattering surface or an emitter"
-        raise OpticsError(f"no specular chain from the eye reaches {where}: aim the eye at the image (its view "
-                          f"of {eye.spec.fov_deg[0]:g} x {eye.spec.fov_deg[1]:g} deg holds none)")
+        where = f"the PGU {pgu} (target.pgu)" if pgu else "an LCD, a scattering surface or an emitter"
+        seen = sorted(((len(p["pixel"]), p["path"]) for p in res["paths"]), reverse=True)[:3]
+        total = sum(len(p["pixel"]) for p in res["paths"]) or 1
+        what = "; ".join(f"{path} ({100 * k / total:.0f} %)" for k, path in seen) or \
+            "nothing: every chief ray leaves the scene"
+        raise OpticsError(f"no specular chain from the eye reaches {where}: aim the eye (the camera) at the "
+                          f"display's image; its view of {eye.spec.fov_deg[0]:g} x {eye.spec.fov_deg[1]:g} deg "
+                          f"sees {what}")
     ranked = sorted(groups.items(), key=lambda kv: -kv[1])
     (events, name), weight = ranked[0]
     primary = chain_from_events(world, list(events), name)
@@ -266,11 +302,17 @@ class Analysis:
         if fwd is None:
             fwd = eye.gaze - (eye.gaze @ up) * up
             if np.linalg.norm(fwd) < 1e-6:
-                raise OpticsError("the eye looks straight up or down: give target.forward")
+                raise SceneError(_scene_file(world.scene), "target.forward", "the eye looks straight up or down, "
+                                 "so its gaze gives no forward direction: give the vehicle's forward")
         self.frame = VehicleFrame.make(np.asarray(fwd, dtype=np.float64), up)
         self.dep = np.asarray(eye.position, dtype=np.float64)
         self.chains = find_chains(world, self.target.get("pgu"))
-        self.pgu = pgu_of(world, self.chains.pgu)
+        try:
+            self.pgu = pgu_of(world, self.chains.pgu)
+        except OpticsError as e:
+            if self.target.get("pgu") is None:
+                raise
+            raise SceneError(_scene_file(world.scene), "target.pgu", str(e)) from None
         self.primary = Imaging(world, self.chains.primary, self.pgu.plane, self.frame)
         self.ghost = Imaging(world, self.chains.ghost, self.pgu.plane, self.frame) if self.chains.ghost else None
         self._scan = None
@@ -368,19 +410,21 @@ class Analysis:
         eyes = _world_points(self.dep, self.frame, offsets)  # (3, e)
         ee = np.repeat(eyes, nf, axis=1)
         tt = np.tile(pts, ne)
-        d0 = self.frame.direction(np.where(np.isfinite(design["hv"][:, :nf]), design["hv"][:, :nf], 0.0))
+        known = np.isfinite(design["hv"][0, :nf])  # field points the DEP sees: the others have no expectation
+        d0 = self.frame.direction(np.where(known, design["hv"][:, :nf], 0.0))
         image = self._target_points(self.dep[:, None], d0, self.centre_hv, tid)
         expected = np.tile(image, ne) - ee
         expected /= np.linalg.norm(expected, axis=0)
-        exp_hv = self.frame.angles(expected)
-        hv, ok = self.primary.solve(ee, tt, exp_hv)
+        exp_hv = np.where(np.tile(known, ne), self.frame.angles(expected), np.nan)
+        hv, ok = self.primary.solve(ee, tt, np.where(np.isfinite(exp_hv), exp_hv, self._initial(tt)))
         verg = self.primary.vergence(ee, np.where(ok, hv, 0.0))
         verg[:, :, ~ok] = np.nan
         out = {"eyes": eyes, "hv": hv.reshape(2, ne, nf), "ok": ok.reshape(ne, nf),
                "vergence": {k: v.reshape(ne, nf) for k, v in _vergence_parts(verg).items()},
                "dynamic": (hv - exp_hv).reshape(2, ne, nf)}
         if self.ghost is not None:
-            ghv, gok = self.ghost.solve(ee, tt, np.where(ok, hv, exp_hv))
+            ghv, gok = self.ghost.solve(ee, tt, np.where(ok, hv, np.where(np.isfinite(exp_hv), exp_hv,
+                                                                           self._initial(tt))))
             out |= {"ghost_hv": ghv.reshape(2, ne, nf), "ghost_ok": gok.reshape(ne, nf)}
         return out
 
@@ -399,13 +443,18 @@ class Analysis:
         nf, npair = pts.shape[1], len(inside)
         eyes = _world_points(self.dep, self.frame, both)
         ee = np.repeat(eyes, nf, axis=1)
-        hv_mid = mids["hv"][:, inside]  # (2, p, f)
-        d_mid = self.frame.direction(np.where(np.isfinite(hv_mid), hv_mid, 0.0).reshape(2, -1))
+        hv_mid = mids["hv"][:, inside].reshape(2, -1)  # (2, p f): where the midpoint sees each field point
+        known = np.isfinite(hv_mid[0])
+        d_mid = self.frame.direction(np.where(known, hv_mid, 0.0))
         m_world = np.repeat(_world_points(self.dep, self.frame, mid), nf, axis=1)
         image = self._target_points(m_world, d_mid, self.centre_hv, tid)
         exp = np.tile(image, 2) - ee
         exp /= np.linalg.norm(exp, axis=0)
-        hv, ok = self.primary.solve(ee, np.tile(pts, 2 * npair), self.frame.angles(exp))
+        exp = np.where(np.tile(known, 2), exp, np.nan)
+        targets = np.tile(pts, 2 * npair)
+        guess = np.where(np.isfinite(exp[:2]), self.frame.angles(np.where(np.isfinite(exp), exp, 1.0)),
+                         self._initial(targets))
+        hv, ok = self.primary.solve(ee, targets, guess)
         # Helmholtz angles: the two eyes lie along the frame's right, so a real point gives no dipvergence
         helm = np.where(ok, self.frame.helmholtz(self.frame.direction(np.where(ok, hv, 0.0))), np.nan)
         helm = helm.reshape(2, 2, npair, nf)
@@ -661,11 +710,23 @@ def check_metric(names: list, where: str) -> None:
         raise OpticsError(f"{where}: {names[0]} has no metric {names[1]!r}{hint}; see docs/user/optics.md")
 
 
-def check_requirements(requirements) -> None:
-    """Refuse, before any ray, a requirement whose KEY names no metric of optics.json's summary
-    (:func:`check_metric`), naming ``target.requirements[i]``."""
-    for i, req in enumerate(requirements):
-        check_metric([arg for _, arg in req.steps], f"target.requirements[{i}]: {req.text!r}")
+def check_requirements(scene, eyebox: bool = True) -> None:
+    """Refuse, before any ray, a requirement of ``scene``'s target whose KEY names no metric of
+    optics.json's summary (:func:`check_metric`), or one on the eyebox where ``eyebox`` is false:
+    :class:`~tracer.core.errors.SceneError` naming scene.json and ``target.requirements[i]``."""
+    for i, req in enumerate(scene.target.get("requirements", [])):
+        names = [arg for _, arg in req.steps]
+        try:
+            check_metric(names, repr(req.text))
+        except OpticsError as e:
+            raise SceneError(_scene_file(scene), f"target.requirements[{i}]", str(e)) from None
+        if names[0] == "eyebox" and not eyebox:
+            raise SceneError(_scene_file(scene), f"target.requirements[{i}]",
+                             f"{req.text!r} is judged over the eyebox, which this run leaves out (--no-eyebox)")
+
+
+def _scene_file(scene) -> str:
+    return str(Path(scene.root) / scene.file)
 
 
 def _exact_objects(world, chains: Chains) -> list[str]:
@@ -696,7 +757,7 @@ def analyse(scene, eyebox: bool = True, spot: bool = True, compare_mesh: bool = 
     Raises :class:`OpticsError` where the scene shows no image to analyse."""
     from ..transport.world import World
 
-    check_requirements(scene.target.get("requirements", []))
+    check_requirements(scene, eyebox)
     t0 = time.perf_counter()
     world = World(scene) if world is None else world
     analysis = Analysis(world)
@@ -711,6 +772,7 @@ def analyse(scene, eyebox: bool = True, spot: bool = True, compare_mesh: bool = 
         "exact_surfaces": _exact_objects(world, analysis.chains),
     }
     doc |= out
+    doc["warnings"] = _warnings(out, analysis)
     doc["requirements"] = [r.judge(out["summary"]) for r in scene.target.get("requirements", [])]
     doc["requirements_met"] = all(r["met"] for r in doc["requirements"])
     if compare_mesh and doc["exact_surfaces"]:
@@ -722,13 +784,32 @@ def analyse(scene, eyebox: bool = True, spot: bool = True, compare_mesh: bool = 
     return doc
 
 
+def _warnings(out: dict, analysis: Analysis) -> list[str]:
+    """What a person should know before trusting the figures."""
+    s = out["summary"]["design_eye"]
+    t = analysis.target
+    warn = []
+    seen, total = (int(x) for x in s["field_points_seen"].split("/"))
+    if seen < total:
+        warn.append(f"the design eye point sees {seen} of {total} field points (the others' rays miss an optic or "
+                    "are blocked): the summary covers those it sees")
+    if abs(s["look_over_deg"]) > 90:
+        warn.append(f"the image lies {s['look_over_deg']:.1f} deg from the vehicle's forward direction: does "
+                    "target.forward point forward?")
+    box = out["summary"].get("eyebox")
+    if box is not None and box["binocular_pairs"] == 0:
+        warn.append(f"no binocular pair fits: IPD {float(t['ipd_mm']):g} mm against an eyebox "
+                    f"{float(t['eyebox_mm'][0]):g} mm wide (target.ipd_mm, target.eyebox_mm)")
+    return warn
+
+
 def report_block(doc: dict) -> dict:
     """report.json's ``optics`` block (and a sweep's ``optics.*`` figures) of :func:`analyse`'s document:
     the chains, the target's values, the design eye's and the eyebox's summaries, the requirements."""
     return {"chains": doc["chains"], "target": {k: (v["value"] if isinstance(v, dict) else v)
                                                  for k, v in doc["target"].items()},
             **doc["summary"], "requirements": doc["requirements"], "requirements_met": doc["requirements_met"],
-            "seconds": doc["seconds"]["total"]}
+            "warnings": doc["warnings"], "seconds": doc["seconds"]["total"]}
 
 
 def optics_block(scene, world=None) -> dict:

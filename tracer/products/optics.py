@@ -239,6 +239,9 @@ def eyebox_chart(doc: dict) -> tuple[np.ndarray, dict]:
     for (title, unit, off, values, signed, partial), rect in zip(panels, rects, strict=False):
         xs, ys, grid = _grid(values, off)
         boxes[title] = charts.box(_map(fig, rect, xs, ys, grid, title, unit, signed, partial))
+    if not panels:
+        fig.text(0.5, 0.5, "the eyebox was not analysed (hud-trace optics --no-eyebox)", ha="center",
+                 fontsize=charts.FONT_PT + 3)
     box = doc["summary"].get("eyebox", {})
     fig.suptitle(f"{doc['scene']}: over the eyebox {doc['target']['eyebox_mm'][0]:g} x "
                  f"{doc['target']['eyebox_mm'][1]:g} mm (IPD {doc['target']['ipd_mm']:g} mm); "

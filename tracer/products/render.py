@@ -23,7 +23,7 @@ import numpy as np
 from ..analysis.aims import aim_preflight
 from ..analysis.brightness import brightness_theorem
 from ..analysis.hud import hud_figures
-from ..analysis.optics import optics_block
+from ..analysis.optics import check_requirements, optics_block
 from ..analysis.sections import find_sections
 from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from ..core.imageio import read_exr_channels, read_image, write_exr, write_png
@@ -192,8 +192,14 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
     report["polarisation"] = world.polarisation_report()
     report["hud"] = figures
-    report["optics"] = clean(optics_block(scene, world)) if analyse and world.accel is not None and not result.partial \
-        else None
+    # the optical analysis from the scene's own eye (the design eye point), whichever eye rendered
+    own_eye = world.eye.spec is scene.eye
+    report["optics"] = clean(optics_block(scene, world if own_eye else None)) \
+        if analyse and world.accel is not None and not result.partial else None
+    if report["optics"] is not None:
+        report["warnings"] += [f"optics: {w}" for w in report["optics"].get("warnings", [])]
+        if "error" in report["optics"] and "target" in scene.raw:  # asked for, and not possible
+            report["warnings"].append(f"optics: {report['optics']['error']}")
     run_id = uuid.uuid4().hex
     report = {"run_id": run_id} | report
     attrs = {"hud:method": result.method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
@@ -232,6 +238,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     report's image block says which)."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
+    if analyse:
+        check_requirements(scene)  # the target's requirements, judged after the render: refused before it
     outputs = OutputSet(out_dir, OUTPUT_NAMES, scene_root=scene.root).open()
     try:
         world = World(scene, None if eye == "centre" else ThinLensEye(eye_for(scene, eye)))
