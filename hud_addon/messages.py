@@ -113,6 +113,10 @@ def blender_terms(error, folder: Path, scene) -> str:
             where += f": HUD Eye > {ANALYSER.title}" + (f" > {f.title}" if f is not None else "")
     elif field == "polarisation":
         where = "Render Properties > HUD Tracer > Polarisation"
+    elif field.startswith("target"):
+        key = field[len("target"):].lstrip(".").split("[")[0]
+        shown = {"eyebox_mm": "Eyebox", "ipd_mm": "IPD", "field_grid": "Field grid", "eye_grid": "Eye grid"}
+        where = "Render Properties > HUD Optics > " + shown.get(key, f"Target ({key})" if key else "Target")
     elif field.startswith("methods."):
         method, _, option = field[len("methods."):].partition(".")
         where = f"Render Properties > HUD Tracer > {method.capitalize()} options"

@@ -337,7 +337,10 @@ class HUD_OT_optical_analysis(bpy.types.Operator):
                     raise ValueError(blender_terms(e, exported, scene)) from None
                 outputs = OutputSet(folder, OPTICS_FILES).open()  # checked and locked before the first ray
                 try:
-                    doc = analyse(loaded)
+                    try:
+                        doc = analyse(loaded)
+                    except SceneError as e:  # the target's fields: in the panel's words
+                        raise ValueError(blender_terms(e, exported, scene)) from None
                     outputs.commit(optics_files(doc))
                     outputs.keep()
                 finally:

@@ -59,6 +59,15 @@ def scenario_optics(out):
     bpy.ops.hud.optical_analysis()
     result = operators.OPTICS[scene.name]
     res["by_hand"] = {"summary": result["summary"], "rows": result["rows"]}
+    # a mistyped requirement in the Target text: refused in the panel's words, nothing written
+    scene.hud.optics_target = json.dumps({"requirements": ["design_eye.vid < 1001"]})
+    scene.hud.optics_folder = str(Path(out) / "refused")
+    try:
+        bpy.ops.hud.optical_analysis()
+        res["refused"] = None
+    except RuntimeError as e:
+        res["refused"] = str(e)
+    scene.hud.optics_target = ""
     # a windshield made from parameters, beside the rest, exported with its two exact surfaces
     scene.cursor.location = (0.0, 1.5, 0.0)
     bpy.ops.hud.add_windshield(size_mm=(600.0, 400.0), wedge_mrad=0.3, radius_x_mm=4000.0)
@@ -127,3 +136,7 @@ def test_the_panel_analyses_a_scene_built_by_hand(optics_run):
     assert s["static_distortion_mrad"] < 0.01
     assert res["by_hand"]["summary"]["eyebox"]["dipvergence_mrad"] < 0.01
     assert (out / "by-hand" / "optics.csv").is_file()
+    message = res["refused"]
+    assert "Optical Analysis" in message and "HUD Optics > Target (requirements)" in message, message
+    assert "vid_mm" in message and "scene.json" not in message
+    assert not (out / "refused" / "optics.json").exists()
