@@ -227,7 +227,8 @@ def cmd_render(args) -> int:
     for side, out, report in done:
         lum = report["luminance"]
         eye = f" ({side} eye)" if side != "centre" else ""
-        print(f"{args.method}{eye}: {report['rays']:,} rays, {report['paths']:,} paths in {report['seconds']:.1f} s "
+        print(f"{_method_said(report)}{eye}: {report['rays']:,} rays, {report['paths']:,} paths in "
+              f"{report['seconds']:.1f} s "
               f"({report['rays_per_second']:,.0f} rays/s); efficiency {report['efficiency']:.3e}; "
               f"luminance mean {lum['mean']:.4g}, max {lum['max']:.4g} cd/m^2 -> {out}", file=sys.stderr)
         for w in report["warnings"]:  # the report's list: the method's own and the noise check
@@ -237,6 +238,18 @@ def cmd_render(args) -> int:
     if result.found == 0:
         return EXIT_NO_LIGHT
     return 0
+
+
+def _method_said(report: dict) -> str:
+    """The method as a render's summary line names it: ``auto`` with the method it chose for each channel
+    (``auto (chose backward)``, ``hybrid (hud: backward, environment: photon)``)."""
+    channels = (report.get("method_details") or {}).get("channels") or {}
+    chosen = {name: ch.get("method") or "skipped" for name, ch in channels.items()}
+    if not chosen:
+        return report["method"]
+    if list(chosen) == ["scene"]:
+        return f"{report['method']} (chose {chosen['scene']})"
+    return f"{report['method']} (" + ", ".join(f"{k}: {v}" for k, v in chosen.items()) + ")"
 
 
 def cmd_presets(args) -> int:
@@ -583,10 +596,12 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
     from .core.validate import available_cpus
     from .methods import DEFAULT_METHOD, INTEGRATORS
 
     ap = Parser(prog="hud-trace", description="Render what an eye sees through a HUD, in cd/m^2.")
+    ap.add_argument("--version", action="version", version=f"hud-trace {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a preset or a scene folder")
     r.add_argument("scene", help="preset name (see `hud-trace presets`) or scene folder")
@@ -595,7 +610,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = r.add_mutually_exclusive_group(required=True)
     b.add_argument("--rays", type=ray_count, help="budget in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--seed", type=int, default=0,
+                   help="the seed of the random streams, 0 to 2^63 - 1 (default 0): with --rays the same seed gives "
+                        "the same image on any number of workers")
     r.add_argument("--eye", choices=("centre", "left", "right", "both"), default="centre",
                    help="the eye that sees: the scene's own (centre, the design eye point), or the left or right eye "
                         "of a binocular pair, IPD / 2 to that side (target.ipd_mm, default 65 mm); both: each into "

@@ -102,3 +102,20 @@ def test_a_misspelt_option_is_named_before_a_missing_required_one(args, words, t
                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1 and words in res.stderr, res.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_version_seed_help_and_auto_naming_its_choice(tmp_path, capsys):
+    """`hud-trace --version`; `--seed` says what it does; an `auto` render names the method it chose."""
+    from tracer import __version__
+
+    with pytest.raises(SystemExit) as e:
+        run_cli("--version")
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"hud-trace {__version__}"
+    with pytest.raises(SystemExit):
+        run_cli("render", "--help")
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps its lines
+    assert "--seed SEED the seed of the random streams" in text and "same image on any number of workers" in text
+    code, err = run_cli("render", "analytic-mirror", "--method", "auto", "--rays", "200000", "--workers", "1",
+                        "--quiet", "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "auto (chose backward):" in err

@@ -207,6 +207,12 @@ TINY_OR_MISTYPED = {
     "sun colour of luminance 0": (set_field(("environment",), {"type": "none", "sun": {"direction": [0, 1, 1],
                                                                                        "color": [5e-324, 0.0, 0.0]}}),
                                   "environment.sun.color"),
+    # an almost opaque analyser: 1e-300 rendered black with exit 0, 1e-40 overflowed a reciprocal
+    "analyser of 1e-300": (set_field(("eye", "analyser"), {"transmittance_along": 1e-300,
+                                                           "transmittance_across": 0.0}),
+                           "eye.analyser.transmittance_along"),
+    "analyser of 1e-40": (set_field(("eye", "analyser"), {"transmittance_along": 1e-40, "transmittance_across": 0.0}),
+                          "eye.analyser.transmittance_along"),
     # an analyser that passes nothing rendered black with "try the other method, or more rays"
     "analyser passing nothing": (set_field(("eye", "analyser"), {"transmittance_along": 0.0,
                                                                  "transmittance_across": 0.0}),

@@ -64,6 +64,39 @@ def test_malformed_mesh_files_give_one_line_naming_file_and_field(mirror, earlie
     assert hashes(out) == before
 
 
+#: Files that trimesh reported in its parsers' words ("index 0 is out of bounds", "Unterminated string",
+#: "'int' object has no attribute 'get'"): file, bytes, words.
+BAD_CONTAINERS = {
+    "an empty GLB": ("m.glb", b"", "the file is empty"),
+    "a truncated GLB": ("m.glb", b"glTF" + (2).to_bytes(4, "little") + (4096).to_bytes(4, "little") + b"abcd",
+                        "declares 4,096 bytes but the file has 16"),
+    "not a GLB": ("m.glb", b"solid x\nendsolid x\n" * 2, "not a glTF binary"),
+    "a glTF that is not JSON": ("m.gltf", b'{"asset": {"version": "2.0"}, "meshes": [', "not valid JSON"),
+    "a glTF of the wrong shape": ("m.gltf", b'{"asset": {"version": "2.0"}, "meshes": 5}', '"meshes" must be a list'),
+    "a glTF without its asset": ("m.gltf", b"[1, 2]", "not a glTF document"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CONTAINERS))
+def test_broken_gltf_files_say_what_is_wrong_with_them(mirror, earlier, case):
+    out, before = earlier
+    name, data, words = BAD_CONTAINERS[case]
+    (mirror / "meshes" / name).write_bytes(data)
+    edit_json(mirror, lambda d: d["objects"][0].update(mesh=f"meshes/{name}"))
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", "objects[0].mesh", f"meshes/{name}", words)
+    assert hashes(out) == before
+
+
+def test_an_obj_quad_with_texture_coordinates_loads_without_warnings(mirror):
+    """trimesh's median over the split quad's texture coordinates warned "All-NaN slice" twice on every
+    load (the suite turns RuntimeWarnings into errors)."""
+    quad = "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n"
+    (mirror / "meshes" / "quad.obj").write_text(quad)
+    edit_json(mirror, lambda d: d["objects"][0].update(mesh="meshes/quad.obj"))
+    assert len(load_scene(mirror).objects[0].faces) == 2
+
+
 def _glass(folder: Path, faces_edit) -> None:
     """Turn the mirror of analytic-mirror into a glass box whose faces ``faces_edit`` spoils."""
     import trimesh

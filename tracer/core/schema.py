@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ImageReadError, SceneError
-from .validate import FieldChecker
+from .validate import MIN_FACTOR, FieldChecker
 
 #: Default of a field that must be given.
 REQUIRED = object()
@@ -152,8 +152,12 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
     """The parsed value of field ``f`` from its JSON ``value`` (see the module docstring)."""
     k = f.kind
     if k == "number":
-        return ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum,
-                         max_exclusive=f.exclusive_max)
+        v = ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum,
+                      max_exclusive=f.exclusive_max)
+        if f.minimum == 0.0 and f.maximum == 1.0 and 0.0 < v < MIN_FACTOR:
+            ck.fail(fld, f"{v:g} is below {MIN_FACTOR:g}: a factor this small underflows the tracer's float32 path "
+                         "weights (the image would come out black); give 0 or at least that")
+        return v
     if k == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             if not (isinstance(value, float) and value.is_integer()):

@@ -26,6 +26,10 @@ MAX_LUMINANCE = 1e12
 #: thousandth of the eye's absolute threshold (about 1e-6); below it the float32 path weights of a few
 #: optical events underflow to zero and the image would come out black without a warning.
 MIN_LUMINANCE = 1e-9
+#: The smallest positive factor (a transmittance, reflectance or share of a field in [0, 1]): float32 path
+#: weights hold about 1e-38, and a path meets several such factors (an analyser's 1e-40 overflowed a
+#: reciprocal, 1e-300 rendered black with exit 0).
+MIN_FACTOR = 1e-9
 #: Largest luminous flux of one object, lm (a stadium's floodlights are about 1e8).
 MAX_FLUX = 1e10
 #: Every position (eye, translations, mesh vertices in the world) lies within this distance of the

@@ -3,7 +3,9 @@ the closed outward surface a dielectric must be. Every error names the file and 
 
 from __future__ import annotations
 
+import json
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +30,38 @@ def _check_obj_indices(ck: FieldChecker, path: Path, rel: str, fld: str):
         ck.fail(fld, f"cannot read mesh {rel}: line {line}: a face refers to element 0 (OBJ counts from 1)")
 
 
+def _check_container(ck: FieldChecker, path: Path, rel: str, fld: str):
+    """Say what is wrong with a mesh file that trimesh would report in its parsers' words: an empty file,
+    a glTF binary whose header is not one or that ends before the length it declares, a .gltf that is
+    not a JSON object (Khronos glTF 2.0, sec. 4.4: the GLB header is magic "glTF", version, length)."""
+    size = path.stat().st_size
+    if size == 0:
+        ck.fail(fld, f"cannot read mesh {rel}: the file is empty (0 bytes)")
+    suffix = path.suffix.lower()
+    if suffix == ".glb":
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+        if len(head) < 12 or head[:4] != b"glTF":
+            ck.fail(fld, f"cannot read mesh {rel}: not a glTF binary (it does not begin with the 12-byte header "
+                         "'glTF', version, length)")
+        declared = int.from_bytes(head[8:12], "little")
+        if declared != size:
+            ck.fail(fld, f"cannot read mesh {rel}: its header declares {declared:,} bytes but the file has {size:,} "
+                         "(truncated or damaged)")
+    elif suffix == ".gltf":
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except UnicodeDecodeError:
+            ck.fail(fld, f"cannot read mesh {rel}: not a text file (a .gltf is JSON; a binary glTF ends in .glb)")
+        except json.JSONDecodeError as e:
+            ck.fail(fld, f"cannot read mesh {rel}: not valid JSON ({e.msg}, line {e.lineno} column {e.colno})")
+        if not isinstance(data, dict) or not isinstance(data.get("asset"), dict):
+            ck.fail(fld, f"cannot read mesh {rel}: not a glTF document (a JSON object with an \"asset\" block)")
+        for key in ("meshes", "accessors", "bufferViews", "buffers"):
+            if key in data and not isinstance(data[key], list):
+                ck.fail(fld, f"cannot read mesh {rel}: its \"{key}\" must be a list")
+
+
 def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     """(vertices (v,3), faces (f,3), uv (v,2) or None) from OBJ, PLY, STL, OFF or glTF through trimesh."""
     import trimesh
@@ -45,7 +79,15 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     if path.suffix.lower() == ".obj":
         _check_obj_indices(ck, path, rel, fld)
     try:
-        loaded = trimesh.load(str(path), process=False, maintain_order=True)
+        _check_container(ck, path, rel, fld)
+    except OSError as e:
+        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
+    try:
+        with warnings.catch_warnings():
+            # trimesh takes the median of a quad's texture coordinates it splits (nanmedian of an all-NaN
+            # slice where a face has none): RuntimeWarnings about its own bookkeeping, not the mesh
+            warnings.simplefilter("ignore", RuntimeWarning)
+            loaded = trimesh.load(str(path), process=False, maintain_order=True)
         if isinstance(loaded, trimesh.Scene):
             meshes = list(loaded.dump()) if hasattr(loaded, "dump") else list(loaded.geometry.values())
             if not meshes:
