@@ -54,6 +54,13 @@ from .sections import Sections, erode, find_sections
 
 #: Window of the spot's smoothing, as a share of the display's width in pixels.
 SPOT_WINDOW = 0.08
+#: Every key of the figures (report.json's ``hud``) and of their ``spot``: a sweep's keys are checked
+#: against them before its runs (tracer.scans.requirements).
+HUD_KEYS = ("display_pixels", "note", "display_cd_m2", "symbol_pixels_from", "symbol_threshold_cd_m2", "unlit_pixels",
+            "symbol_pixels", "background_pixels", "symbol_cd_m2", "background_cd_m2", "contrast_ratio",
+            "environment_behind_symbols_cd_m2", "background_behind_symbols_cd_m2", "hud_contrast_ratio", "spot")
+SPOT_KEYS = ("peak_cd_m2", "peak_pixel", "peak_over_median_background", "peak_over_symbol", "half_peak_diameter_deg",
+             "smoothing_px", "environment_cd_m2", "contrast_against_environment")
 #: Symbols are the pixels above this share of the display's 99th percentile of luminance: an LCD's
 #: clear cells vary less than tenfold across a display, its black cells lie tenfold (CR >= 10) below.
 SYMBOL_SHARE = 0.1

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 
+from ..analysis.hud import HUD_KEYS, SPOT_KEYS
 from ..core.jsonpath import Requirement
 from ..core.jsonpath import parse_requirement as parse_text
 from ..products.report import REPORT_SECTIONS
@@ -62,6 +63,14 @@ def check_report_key(argument: str, steps, optics_only: bool = False) -> None:
         raise SweepArgumentError(argument, f"{name!r} is not a section of a run's report.json ({hint}the sections "
                                            f"are: {', '.join(REPORT_SECTIONS)})")
     names = [arg for _, arg in steps[1:]]
+    if name == "hud" and names:
+        for known, key in ((HUD_KEYS, names[0]), (SPOT_KEYS, names[1] if names[0] == "spot" and len(names) > 1
+                                                  else None)):
+            if key is not None and key not in known:
+                near = difflib.get_close_matches(key, known, n=1)
+                hint = f" (did you mean {near[0]!r}?)" if near else ""
+                raise SweepArgumentError(argument, f"the HUD figures have no {key!r}{hint}; they are: "
+                                                   f"{', '.join(known)}")
     if name == "optics" and names and names[0] in ("design_eye", "eyebox"):
         try:
             check_metric(names, name)
