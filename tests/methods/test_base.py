@@ -151,3 +151,24 @@ def test_roulette_reference_comes_from_a_pilot_that_every_process_repeats(tmp_pa
     assert a == b and a == pytest.approx(159.5, rel=0.1)
     edit_json(folder, lambda d: d["objects"][2]["emission"].update(luminance=0.0))
     assert INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance == 0.0
+
+
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_an_emitter_facing_away_is_named_where_no_light_is_found(tmp_path, method):
+    """A panel turned the wrong way: "no light path found" names it, the side it emits from and
+    two_sided (before: only "try the other method, or more rays"); turned back, no such warning."""
+    from presets._build import SceneBuilder, frame_matrix, rectangle
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.scene import load_scene
+
+    eye = {"position": [0.0, 0.0, 0.0], "gaze": [0.0, 1.0, 0.0], "up": [0.0, 0.0, 1.0], "pupil_diameter_mm": 4.0,
+           "resolution": [8, 8], "fov_deg": [20.0, 20.0]}
+    warnings = {}
+    for facing in ([0, -1, 0], [0, 1, 0]):
+        sb = SceneBuilder(tmp_path / str(facing[1]), "panel", "a panel")
+        sb.add("panel", rectangle(100.0, 100.0)[:2], {"type": "absorber"},
+               frame_matrix([0.0, 500.0, 0.0], [1, 0, 0], facing), emission={"luminance": 1000.0})
+        result = INTEGRATORS[method](load_scene(sb.write(eye=eye)), 1).render(Budget(rays=50_000))
+        warnings[facing[1]] = " ".join(result.warnings)
+    assert "'panel' emits from the front side only" in warnings[1] and "two_sided" in warnings[1]
+    assert "front side" not in warnings[-1]

@@ -66,6 +66,28 @@ Preview = Callable[[Film], None]
 PREVIEW_SECONDS = 1.0
 
 
+def facing_hint(world) -> str:
+    """Where no light was found: the one-sided emitters whose front side (where their vertices run
+    counter-clockwise, (v1 - v0) x (v2 - v0)) faces away from the eye on every face, a likely cause
+    ("" where none does)."""
+    eye = np.asarray(world.eye.position, dtype=np.float64)
+    away = []
+    for o in world.scene.objects:
+        if o.emission is None or o.emission.two_sided:
+            continue
+        t = o.triangles
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        if np.all(np.einsum("ij,ij->i", eye - t.mean(axis=1), n) <= 0):
+            away.append(o.name)
+    if not away:
+        return ""
+    names = ", ".join(repr(n) for n in away)
+    return (f"; {names} emit{'s' if len(away) == 1 else ''} from the front side only, and every face of "
+            f"{'it' if len(away) == 1 else 'them'} faces away from the eye (the front is where the vertices run "
+            "counter-clockwise): turn it, or give its emission \"two_sided\": true, unless its light is meant "
+            "to reach the eye by mirrors")
+
+
 @dataclass
 class Budget:
     """Stop after ``rays`` ray segments or ``seconds`` of wall time, whichever comes first."""
@@ -300,7 +322,7 @@ class Integrator:
             result.warnings.append(
                 f"no light path found: {self.traced(result)} and none {self.found_what} (efficiency "
                 f"{result.efficiency:.3g}): the scene has light, so either none of it reaches the eye or this "
-                "method cannot find it (try the other method, or more rays)")
+                "method cannot find it (try the other method, or more rays)" + facing_hint(self.world))
         elif result.found < 100:
             result.warnings.append(
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
