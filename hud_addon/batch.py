@@ -73,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
 
     blend = Path(args.blend).resolve()
     if not blend.is_file():
-        print(f"error: {blend}: no such .blend file", file=sys.stderr)
+        what = "a folder, not a .blend file" if blend.is_dir() else "no such .blend file"
+        print(f"error: {blend}: {what}", file=sys.stderr)
         return 2
     try:
         check_render_args(argparse.Namespace(rays=args.rays, seconds=args.seconds, seed=args.seed or 0,

@@ -114,6 +114,15 @@ def test_hud_render_refuses_bad_arguments_before_blender_starts(tmp_path, case):
     assert len(lines) == 1 and lines[0].startswith("error: ") and (case.split()[0] in lines[0] or str(out) in lines[0])
 
 
+def test_hud_render_of_a_folder_named_like_a_blend_says_it_is_a_folder(tmp_path):
+    """A folder x.blend was "no such .blend file"."""
+    (tmp_path / "x.blend").mkdir()
+    proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(tmp_path / "x.blend"), "--out",
+                           str(tmp_path / "out"), "--rays", "1000"], capture_output=True, text=True, timeout=120,
+                          cwd=ROOT)
+    assert proc.returncode == 2 and proc.stderr.strip().endswith("x.blend: a folder, not a .blend file"), proc.stderr
+
+
 @pytest.mark.slow
 def test_hud_render_of_a_file_blender_cannot_render_exits_2_in_one_line(tmp_path):
     """A file that is not a .blend was a traceback from open_mainfile, and Blender's own refusals (no
