@@ -478,6 +478,7 @@ SHOW_CHECKS_AFTER_S = 2.0
 def cmd_sweep(args) -> int:
     from .methods import Budget
     from .products.outputs import OutputError
+    from .products.report import NOISY
     from .runtime.allocator import keep_freed_memory
     from .scans.fields import SweepArgumentError
     from .scans.plan import DEFAULT_Y, OPTICS_Y, check_arguments, plan_sweep
@@ -507,6 +508,11 @@ def cmd_sweep(args) -> int:
         print(result.run_line(run), file=sys.stderr)
         if not run.found_light:
             print(f"warning: run {run.index}: the method found no light path", file=sys.stderr)
+        noise = (run.report.get("noise") or {}).get("median_relative_standard_error_lit_pixels")
+        if noise is not None and noise > NOISY and not run.partial:
+            print(f"warning: run {run.index}: judged on a noisy image (the lit pixels' median relative standard "
+                  f"error is {noise:.2f}): its figures may be off by that much; give each run more rays or time",
+                  file=sys.stderr)
         for q, j in zip(result.plan.requirements, result.judge(run), strict=True):
             if j["value"] is None and not run.partial and q.text not in absent:
                 absent.add(q.text)  # said once: a mistyped KEY fails every run

@@ -39,3 +39,22 @@ def test_readouts_of_a_file_that_is_not_a_report_give_one_line(tmp_path):
         (tmp_path / name).write_text(text)
         code, err = run_cli("readouts", tmp_path / name)
         assert_one_line_error(code, err, name, "not a hud-trace report")
+
+
+def test_readouts_of_a_noisy_render_whose_background_median_is_0(tmp_path):
+    """A forward render of few rays leaves most background pixels at 0: the spot's ratio to the median
+    is null, and readouts said "not a hud-trace report" (a None formatted as a number)."""
+    from tracer.products.report import readouts
+
+    code, err = run_cli("render", "analytic-mirror", "--rays", "200000", "--workers", "1", "--quiet", "--out",
+                        tmp_path / "r")
+    assert code == 0, err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    report["hud"] = {"display_pixels": 100, "symbol_pixels_from": "lcd_cells", "symbol_pixels": 10,
+                     "background_pixels": 20, "symbol_cd_m2": 761.4, "background_cd_m2": 3.0, "contrast_ratio": 254.8,
+                     "spot": {"peak_cd_m2": 8.2, "peak_pixel": [1, 2], "peak_over_median_background": None,
+                              "peak_over_symbol": 0.011, "half_peak_diameter_deg": 1.0, "smoothing_px": 29}}
+    (tmp_path / "r" / "report.json").write_text(json.dumps(report))
+    assert dict(readouts(report))["Spot"] == "8.2 cd/m², the background's median is 0, 1 deg"
+    code, err = run_cli("readouts", tmp_path / "r")
+    assert code == 0, err

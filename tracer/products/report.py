@@ -136,8 +136,9 @@ def readouts(report: dict) -> list[tuple[str, str]]:
         rows.append(("Display", hud["note"]))
     spot = hud.get("spot")
     if spot:
-        rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {spot['peak_over_median_background']:.3g} x the "
-                             f"background, {spot['half_peak_diameter_deg']:.2g} deg"))
+        over = spot["peak_over_median_background"]  # None where the background's median is 0 (a noisy render)
+        times = f"{over:.3g} x the background" if over is not None else "the background's median is 0"
+        rows.append(("Spot", f"{spot['peak_cd_m2']:,.4g} cd/m², {times}, {spot['half_peak_diameter_deg']:.2g} deg"))
         if spot.get("contrast_against_environment") is not None:
             rows.append(("Spot against the environment", f"{spot['contrast_against_environment']:.4g} : 1 (environment "
                                                          f"{spot['environment_cd_m2']:,.4g} cd/m²)"))
