@@ -103,6 +103,14 @@ class StopFlag:
         sys.stderr.write(f"\n{name}: stopping and writing a partial result (Ctrl-C again to abort)\n")
 
 
+class Stopped(Exception):
+    """A stop signal during a command that stops by leaving nothing written (the eyebox scan)."""
+
+
+def _raise_stopped(signum, frame):
+    raise Stopped(signal.Signals(signum).name)
+
+
 class ArgumentError(Exception):
     """A command-line argument out of its range (the message names the argument)."""
 
@@ -394,6 +402,9 @@ def cmd_eyebox(args) -> int:
         return EXIT_INPUT
     keep_freed_memory()
     bar = None if args.quiet else ProgressBar()
+    # A scan takes seconds and is deterministic: a stop signal ends it with nothing written (not the
+    # default death of SIGTERM and SIGHUP, which left no word and a locked folder's temporary files).
+    previous = {s: signal.signal(s, _raise_stopped) for s in STOP_SIGNALS}
     try:
         with tempfile.TemporaryDirectory(prefix="hud-trace-") as tmp:
             scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
@@ -404,12 +415,20 @@ def cmd_eyebox(args) -> int:
                 outputs.keep()
             finally:
                 outputs.close()
+    except Stopped as e:
+        if bar:
+            bar.close()
+            bar = None
+        print(f"\n{e}: the eyebox scan stopped, nothing written; {args.out} keeps what it held", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except FieldNotFound as e:
         print(f"error: --field: {e}", file=sys.stderr)
         return EXIT_INPUT
     except (*WRITE_ERRORS, OutputError) as e:
         return _write_errors(e, args.out)
     finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         if bar:
             bar.close()
     d = result.design_cd_m2

@@ -33,10 +33,12 @@ import os
 import queue
 import signal
 import sys
+import threading
 import time
 import types
 from pathlib import Path
 
+from ..core.errors import StoppedBeforeFirstBatch
 from ..core.validate import check_workers
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import drive
@@ -52,17 +54,23 @@ READY = "ready"
 STARTUP_TIMEOUT = 600.0
 
 
-def _await_workers(pool, ready, workers: int):
+def _await_workers(pool, ready, workers: int, should_stop=None):
     """Wait until every worker has built its world. Raises RuntimeError with the worker's message when
     one could not, and when a worker process exits while starting (the pool would start another in
-    its place, forever: a worker that cannot even import the tracer)."""
+    its place, forever: a worker that cannot even import the tracer); StoppedBeforeFirstBatch where
+    ``should_stop()`` turned true meanwhile (a stop signal to the process group reaches workers that
+    have not yet set their signals, and ends them)."""
     pids = {p.pid for p in pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
     deadline = time.perf_counter() + STARTUP_TIMEOUT
     started = 0
     while started < workers:
+        if should_stop is not None and should_stop():
+            raise StoppedBeforeFirstBatch("stopped while the worker processes started")
         try:
-            msg = ready.get(timeout=0.5)
+            msg = ready.get(timeout=0.1)
         except queue.Empty:
+            if should_stop is not None and should_stop():
+                raise StoppedBeforeFirstBatch("stopped while the worker processes started") from None
             if {p.pid for p in pool._pool} - pids or any(p.exitcode is not None for p in pool._pool):
                 raise RuntimeError("a worker process exited while starting (see its message above)") from None
             if time.perf_counter() > deadline:
@@ -74,19 +82,22 @@ def _await_workers(pool, ready, workers: int):
 
 
 def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, scene_hash: str,
-                 allow_external: bool, ready):
+                 allow_external: bool, ready, ending):
     """A worker's start: its own world (the scene folder's, seen by the parent's eye ``eye``, the fields
     of an EyeSpec: a pupil that follows the image was chosen there), the integrator of ``method`` with
     the parent's ``options`` (what its prepare decided), and the roulette's pilot. The folder must still
     hold the parent's scene (``scene_hash``): one edited since, on disk or in the parent's memory, would
     render another scene in the workers. Arguments are plain data: inside Blender nothing of the tracer
     can be unpickled before tracer/runtime/worker_bootstrap.py ran."""
-    # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP reaches the whole process group,
-    # and a worker must not die of it mid-batch with a traceback. SIGTERM keeps its default (a quiet
-    # exit): the pool ends its workers with it.
+    # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP, and a batch scheduler's SIGTERM,
+    # reach the whole process group, and a worker must not die of it mid-batch (the pool would start
+    # another and wait for the lost batch forever). SIGTERM still ends a worker when the parent ends the
+    # pool itself (``ending``, a multiprocessing Event, set first).
     for name in ("SIGINT", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), signal.SIG_IGN)
+    if hasattr(signal, "SIGTERM"):
+        signal.signal(signal.SIGTERM, lambda _s, _f: os._exit(0) if ending.is_set() else None)
     keep_freed_memory()  # a worker process exists to trace
     try:
         scene = load_scene(scene_dir, allow_external=allow_external)
@@ -100,6 +111,21 @@ def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, option
         return
     _WORKER["integrator"] = integrator
     ready.put(READY)
+
+
+def quiet_resource_tracker():
+    """Start multiprocessing's resource tracker with SIGHUP ignored (an ignored signal stays ignored in
+    the child): a terminal's hang-up reaches the whole process group, and the tracker, which ignores
+    SIGINT and SIGTERM only, printed KeyError tracebacks for the queues' semaphores as it died."""
+    if not hasattr(signal, "SIGHUP") or threading.current_thread() is not threading.main_thread():
+        return
+    from multiprocessing import resource_tracker
+
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.signal(signal.SIGHUP, previous)
 
 
 def _run_batch(index: int):
@@ -215,23 +241,28 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
         raise RuntimeError(f"no Python interpreter to run worker processes (sys.executable is {sys.executable})")
     ctx = mp.get_context("spawn")
     ctx.set_executable(executable)
-    ready = ctx.Queue()
+    quiet_resource_tracker()  # before the first semaphore: the queue's registers with it
+    ready, ending = ctx.Queue(), ctx.Event()
     initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
                                           local.worker_options(), dataclasses.asdict(local.eye.spec),
-                                          local.scene.scene_hash, local.scene.allow_external, ready))
+                                          local.scene.scene_hash, local.scene.allow_external, ready, ending))
     t0 = time.perf_counter()
     with _main_hidden():
         pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
     with pool:  # leaving it on an error terminates the workers
-        _await_workers(pool, ready, workers)
-        startup = time.perf_counter() - t0
-        result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop, f"x{workers}",
-                       started=started, preview=preview)
-        # Batches still in flight are not needed, but the workers finish them (at most two each, of a
-        # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
-        # CPython's task handler (waiting for the inqueue's lock, never released).
-        pool.close()
-        pool.join()
+        try:
+            _await_workers(pool, ready, workers, should_stop)
+            startup = time.perf_counter() - t0
+            result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop,
+                           f"x{workers}", started=started, preview=preview)
+            # Batches still in flight are not needed, but the workers finish them (at most two each, of a
+            # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
+            # CPython's task handler (waiting for the inqueue's lock, never released).
+            pool.close()
+            pool.join()
+        except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
+            ending.set()  # the workers' SIGTERM ends them again: the pool's terminate follows
+            raise
     result.extra["workers"] = workers
     result.extra["startup_seconds"] = startup
     return result
