@@ -814,10 +814,13 @@ def report_block(doc: dict) -> dict:
 
 def optics_block(scene, world=None) -> dict:
     """report.json's ``optics`` block for a render (:func:`report_block`, without spots and the mesh
-    comparison), or {"error": why} where the scene shows no image to analyse."""
+    comparison), or {"error": why} where the scene shows no image to analyse or lacks a target field the
+    analysis needs (the render does not fail for it; its requirements were checked before the render)."""
     from ..transport.sequential import ChainError
 
     try:
         return report_block(analyse(scene, spot=False, compare_mesh=False, world=world))
+    except SceneError as e:  # a field the analysis needs (target.forward for a vertical gaze, target.pgu)
+        return {"error": f"{e.field}: {e.message}"}
     except (OpticsError, ChainError) as e:
         return {"error": str(e)}
