@@ -48,6 +48,8 @@ from ..transport.world import World
 from .allocator import keep_freed_memory
 
 _WORKER: dict = {}
+#: The stop signals a worker leaves to its parent (where the platform has them).
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 #: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
 READY = "ready"
 #: Seconds the parent waits for its workers to start.
@@ -98,6 +100,8 @@ def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, option
             signal.signal(getattr(signal, name), signal.SIG_IGN)
     if hasattr(signal, "SIGTERM"):
         signal.signal(signal.SIGTERM, lambda _s, _f: os._exit(0) if ending.is_set() else None)
+    if hasattr(signal, "pthread_sigmask"):  # blocked since the parent spawned us: what came meanwhile lands now
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     keep_freed_memory()  # a worker process exists to trace
     try:
         scene = load_scene(scene_dir, allow_external=allow_external)
@@ -247,8 +251,18 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
                                           local.worker_options(), dataclasses.asdict(local.eye.spec),
                                           local.scene.scene_hash, local.scene.allow_external, ready, ending))
     t0 = time.perf_counter()
-    with _main_hidden():
-        pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
+    # The workers start with the stop signals blocked (a blocked mask survives fork and exec), so that a
+    # Ctrl-C to the process group while they import does not end them with a traceback; _init_worker
+    # unblocks them once its handlers are set. Blocked here, a signal to this process waits (it is not
+    # lost) and lands when the mask is restored; the pool's own threads keep the mask and never take one.
+    masked = hasattr(signal, "pthread_sigmask")
+    previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if masked else None
+    try:
+        with _main_hidden():
+            pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
+    finally:
+        if masked:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
     with pool:  # leaving it on an error terminates the workers
         try:
             _await_workers(pool, ready, workers, should_stop)
