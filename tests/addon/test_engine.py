@@ -56,11 +56,12 @@ def scenario_cancel(threads, when):
 def test_cancel_stops_within_one_batch_and_writes_a_clean_result(threads):
     """Esc in a 600 s render, at the first check of test_break after the first batch was merged: the
     render stops there, with a clean partial result (every pass finite). One process has merged that
-    batch alone; on a pool the batches that ended in the same wait are merged with it (at most one per
-    worker: they started together) and nothing that came later."""
+    batch alone; on a pool the batches that had ended when the parent took the first are merged with it
+    (at most the two per worker in flight: a worker can end its second while the parent merges) and
+    nothing that came later."""
     res, _ = in_blender(scenario_cancel, threads, "after_first_batch")
     f = res["figures"]
-    assert f["partial"] is True and 1 <= f["batches"] <= threads and f["workers"] == threads
+    assert f["partial"] is True and 1 <= f["batches"] <= 2 * threads and f["workers"] == threads
     if threads == 1:
         assert f["batches"] == 1 and res["test_break_calls"] == 2  # one batch ran, the second check stopped it
     assert res["seconds"] < 30 and res["kept_report"]

@@ -48,6 +48,8 @@ from ..transport.world import World
 from .allocator import keep_freed_memory
 
 _WORKER: dict = {}
+#: Why a render stopped while its workers started.
+STOPPED_AT_START = "stopped while the worker processes started, before the first batch ended"
 #: The stop signals a worker leaves to its parent (where the platform has them).
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 #: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
@@ -67,12 +69,12 @@ def _await_workers(pool, ready, workers: int, should_stop=None):
     started = 0
     while started < workers:
         if should_stop is not None and should_stop():
-            raise StoppedBeforeFirstBatch("stopped while the worker processes started")
+            raise StoppedBeforeFirstBatch(STOPPED_AT_START)
         try:
             msg = ready.get(timeout=0.1)
         except queue.Empty:
             if should_stop is not None and should_stop():
-                raise StoppedBeforeFirstBatch("stopped while the worker processes started") from None
+                raise StoppedBeforeFirstBatch(STOPPED_AT_START) from None
             if {p.pid for p in pool._pool} - pids or any(p.exitcode is not None for p in pool._pool):
                 raise RuntimeError("a worker process exited while starting (see its message above)") from None
             if time.perf_counter() > deadline:
