@@ -24,16 +24,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from presets import PRESETS, hud_direct  # noqa: E402
 from presets.hud_direct_optics import WEDGE_MRAD, first_order_wedge_mrad  # noqa: E402
-from presets.slide import grid_array  # noqa: E402
 from tests.support import imaging  # noqa: E402
 from tests.support.render import render  # noqa: E402
-from tests.support.scenes import edit_json  # noqa: E402
 from tracer.analysis.optics import Analysis, analyse  # noqa: E402
 from tracer.core.imageio import write_png  # noqa: E402
 from tracer.products import charts  # noqa: E402
@@ -113,10 +109,7 @@ def ghost_picture(tmp: Path, path: Path):
     """hud-direct's and hud-direct-wedge's grid line at the image's centre, 0.25 arcmin pixels, side by side."""
     images = []
     for name, kw in (("flat", {}), ("wedge", {"windshield": {"wedge_mrad": WEDGE_MRAD}})):
-        f = hud_direct.write(tmp / f"g-{name}", grid_slide=True, **kw)
-        a = (255 * grid_array(240, 80, thickness=1)).astype(np.uint8)
-        write_png(f / "textures/slide.png", np.repeat(a[:, :, None], 3, axis=2))
-        edit_json(f, lambda d: d["eye"].update(fov_deg=[1.0, 0.5], resolution=[240, 120]))
+        f = imaging.hud_direct_grid(tmp / f"g-{name}", {"fov_deg": [1.0, 0.5], "resolution": [240, 120]}, **kw)
         y, _, _ = render(f, "backward", 3_000_000, seed=1)
         images.append(y)
     top = max(float(im.max()) for im in images)

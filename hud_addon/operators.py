@@ -3,6 +3,7 @@ false-colour view, sweep the eyebox, run the optical analysis."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import tempfile
 from pathlib import Path
@@ -23,7 +24,7 @@ from ..tracer.scans.eyebox import OUTPUT_NAMES as EYEBOX_FILES
 from ..tracer.scans.eyebox import FieldNotFound, ScanArgumentError, eyebox_scan
 from ..tracer.scans.eyebox import output_files as eyebox_files
 from ..tracer.scene import load_scene
-from ..tracer.scene.windshield import windshield_mesh
+from ..tracer.scene.windshield import radius_problem, windshield_mesh
 from ..tracer.transport.sequential import ChainError
 from ..tracer.transport.world import World
 from . import engine
@@ -108,12 +109,9 @@ class HUD_OT_add_windshield(bpy.types.Operator):
         p = {"size_mm": list(self.size_mm), "thickness_mm": self.thickness_mm, "depth_mm": 0.0,
              "wedge_mrad": self.wedge_mrad, "wedge_direction_deg": self.wedge_direction_deg,
              "radius_x_mm": self.radius_x_mm, "radius_y_mm": self.radius_y_mm, "cells": None}
-        least = 0.5 * max(p["size_mm"])
-        for key in ("radius_x_mm", "radius_y_mm"):
-            if 0 < abs(p[key]) < least:
-                self.report({"ERROR"}, f"Add Windshield: a radius must be 0 (flat) or at least half the size "
-                                       f"({least:g} mm)")
-                return {"CANCELLED"}
+        if (bad := radius_problem(p)) is not None:
+            self.report({"ERROR"}, f"Add Windshield: {bad[0]}: {bad[1]}")
+            return {"CANCELLED"}
         try:
             v, f, surfaces = windshield_mesh(p)
         except ValueError as e:
@@ -226,12 +224,30 @@ def show_image(context, name: str, rgb: np.ndarray):
     rgba = np.concatenate([rgb[::-1].astype(np.float32) / 255.0, np.ones((h, w, 1), np.float32)], axis=2)
     image.pixels.foreach_set(rgba.ravel())
     image.update()
+    _in_image_editor(context, image)
+    return image
+
+
+def _in_image_editor(context, image):
+    """Show ``image`` in the first Image Editor of the screen, if there is one (none in background mode)."""
     screen = getattr(context, "screen", None)
     for area in (screen.areas if screen is not None else []):
         if area.type == "IMAGE_EDITOR":
             area.spaces.active.image = image
             break
-    return image
+
+
+@contextlib.contextmanager
+def _exported(context, prefix: str):
+    """The scene as Export HUD Scene writes it, loaded (tracer.scene.Scene) from a temporary folder that
+    lasts the body's time; a SceneError, the loader's or the body's (the analyses read fields too), comes
+    out as a ValueError in Blender's terms (the object or panel and the property)."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        folder = export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene")
+        try:
+            yield load_scene(folder)
+        except SceneError as e:
+            raise ValueError(blender_terms(e, folder, context.scene)) from None
 
 
 class HUD_OT_show_false_colour(bpy.types.Operator):
@@ -273,12 +289,8 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)
         try:
-            with tempfile.TemporaryDirectory(prefix="hud-eyebox-") as tmp:
-                exported = export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene")
-                try:
-                    world = World(load_scene(exported))
-                except SceneError as e:
-                    raise ValueError(blender_terms(e, exported, scene)) from None
+            with _exported(context, "hud-eyebox-") as loaded:
+                world = World(loaded)
                 outputs = OutputSet(folder, EYEBOX_FILES).open()  # checked and locked before the sweep
                 try:
                     result = eyebox_scan(world, half, s.eyebox_step_mm, field, s.eyebox_threshold,
@@ -329,18 +341,10 @@ class HUD_OT_optical_analysis(bpy.types.Operator):
             return {"CANCELLED"}
         OPTICS.pop(scene.name, None)
         try:
-            with tempfile.TemporaryDirectory(prefix="hud-optics-") as tmp:
-                exported = export_scene(context.evaluated_depsgraph_get(), Path(tmp) / "scene")
-                try:
-                    loaded = load_scene(exported)
-                except SceneError as e:
-                    raise ValueError(blender_terms(e, exported, scene)) from None
+            with _exported(context, "hud-optics-") as loaded:
                 outputs = OutputSet(folder, OPTICS_FILES).open()  # checked and locked before the first ray
                 try:
-                    try:
-                        doc = analyse(loaded)
-                    except SceneError as e:  # the target's fields: in the panel's words
-                        raise ValueError(blender_terms(e, exported, scene)) from None
+                    doc = analyse(loaded)
                     outputs.commit(optics_files(doc))
                     outputs.keep()
                 finally:
@@ -358,11 +362,7 @@ class HUD_OT_optical_analysis(bpy.types.Operator):
             image = bpy.data.images.load(str(folder / name), check_existing=True)
             image.reload()
             images.append(image)
-        screen = getattr(context, "screen", None)
-        for area in (screen.areas if screen is not None else []):
-            if area.type == "IMAGE_EDITOR":
-                area.spaces.active.image = images[0]
-                break
+        _in_image_editor(context, images[0])
         d = doc["summary"]["design_eye"]
         self.report({"INFO"} if doc["requirements_met"] else {"WARNING"},
                     f"VID {d['vid_mm']:.0f} mm, ghost {d.get('ghost_separation_centre_arcmin') or 0:.2f} arcmin"

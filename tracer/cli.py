@@ -44,11 +44,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from .core.errors import EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
+from .core.errors import STOP_SIGNALS, EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
 
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
-#: Signals that stop a render the way Ctrl-C does (batch schedulers send SIGTERM, a closed terminal SIGHUP).
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 #: Limits of the render arguments (beyond them a render cannot be meant).
 MAX_SECONDS = 1e7
 MAX_RAYS = 10**15

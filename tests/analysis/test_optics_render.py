@@ -8,13 +8,11 @@ as distorted as it reports."""
 import numpy as np
 import pytest
 
-from presets import hud_direct
 from presets.hud_direct_optics import WEDGE_MRAD
 from presets.slide import grid_array
+from tests.support.imaging import hud_direct_grid
 from tests.support.render import render
-from tests.support.scenes import edit_json
 from tracer.analysis.optics import Analysis, analyse
-from tracer.core.imageio import write_png
 from tracer.scene import load_scene
 from tracer.transport.world import World
 
@@ -31,14 +29,10 @@ RAYS = 3_000_000
 def _scene(folder, accommodation_mm=None, **kw):
     """hud-direct (or a variant through ``kw``) showing the 5 x 3 grid of one LCD pixel wide lines, the eye's
     view narrowed onto the image's centre."""
-    f = hud_direct.write(folder, grid_slide=True, **kw)
-    a = (255 * grid_array(240, 80, thickness=1)).astype(np.uint8)
-    write_png(f / "textures/slide.png", np.repeat(a[:, :, None], 3, axis=2))
     eye = {"fov_deg": list(FOV_DEG), "resolution": list(RESOLUTION)}
     if accommodation_mm is not None:
         eye["accommodation_distance_mm"] = accommodation_mm
-    edit_json(f, lambda d: d["eye"].update(eye))
-    return f
+    return hud_direct_grid(folder, eye, **kw)
 
 
 def _line_fit(y: np.ndarray, near: int, across: np.ndarray, at: float) -> float:
@@ -150,9 +144,8 @@ def test_a_grid_slide_renders_the_distortion_reported(tmp_path):
     arcmin pixels: every line crossing lies where the analysis's chief ray to the crossing's PGU point
     says, within a pixel, and the crossings depart from the best rectangular grid by the static distortion
     the analysis reports (2.1 mrad, 7 pixels), within a pixel."""
-    folder = hud_direct.write(tmp_path / "g", grid_slide=True, windshield={"wedge_mrad": WEDGE_MRAD})
+    folder = hud_direct_grid(tmp_path / "g", windshield={"wedge_mrad": WEDGE_MRAD})
     slide = grid_array(240, 80, thickness=1)
-    write_png(folder / "textures/slide.png", np.repeat((255 * slide).astype(np.uint8)[:, :, None], 3, axis=2))
     scene = load_scene(folder)
     world = World(scene)
     analysis = Analysis(world)

@@ -105,3 +105,20 @@ def wedge_deviation(wedge_mrad: float, ior: float, incidence_deg: float) -> floa
     th = math.radians(incidence_deg)
     tp = math.asin(math.sin(th) / ior)
     return 2 * ior * wedge_mrad * 1e-3 * math.cos(tp) / math.cos(th)
+
+
+def hud_direct_grid(folder: Path, eye: dict | None = None, **kw) -> Path:
+    """hud-direct (``kw``: presets.hud_direct.write's, a windshield) showing the optical analysis's 5 x 3
+    field grid in lines one LCD pixel wide (presets.slide.grid_array), the eye's block updated by ``eye``
+    (a narrow view, an accommodation): the scenes where a render is held to the analysis."""
+    from presets import hud_direct
+    from presets.slide import grid_array
+    from tests.support.scenes import edit_json
+    from tracer.core.imageio import write_png
+
+    f = hud_direct.write(folder, grid_slide=True, **kw)
+    a = (255 * grid_array(240, 80, thickness=1)).astype(np.uint8)
+    write_png(f / "textures/slide.png", np.repeat(a[:, :, None], 3, axis=2))
+    if eye:
+        edit_json(f, lambda d: d["eye"].update(eye))
+    return f

@@ -50,13 +50,6 @@ class VehicleFrame:
     right: np.ndarray
     up: np.ndarray
 
-    @staticmethod
-    def make(forward: np.ndarray, up: np.ndarray) -> VehicleFrame:
-        up = up / np.linalg.norm(up)
-        f = forward - (forward @ up) * up
-        f /= np.linalg.norm(f)
-        return VehicleFrame(f, np.cross(f, up), up)
-
     def angles(self, d: np.ndarray) -> np.ndarray:
         """(2, n) azimuth h and elevation v (rad) of unit directions ``d`` (3, n)."""
         return np.stack([np.arctan2(self.right @ d, self.forward @ d), np.arcsin(np.clip(self.up @ d, -1, 1))])

@@ -25,12 +25,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import SceneError
 from ..optics.materials import LCD
+from ..scene.binocular import vehicle_axes
+from ..scene.format import TARGET
 from ..transport.chains import specular_paths
 from ..transport.sequential import Chain, Plane, chain_from_events
 from .imaging import Imaging, VehicleFrame
@@ -176,13 +177,11 @@ def pgu_of(world, name: str) -> PGU:
 
 @dataclass
 class Chains:
-    """The chains the analysis images: ``primary`` and ``ghost`` (or None), the PGU's name, and the
-    directions (3, k) from the eye and landing points (2, k) of the primary chain's scan rays."""
+    """The chains the analysis images: ``primary`` and ``ghost`` (or None), and the PGU's name."""
 
     primary: Chain
     ghost: Chain | None
     pgu: str
-    ratio: float | None
 
 
 def _events(world, labels: list[str], pgu: str | None) -> tuple[list[str], str] | None:
@@ -226,17 +225,12 @@ def find_chains(world, pgu: str | None = None, rays: int = 3000) -> Chains:
                           f"display's image; its view of {eye.spec.fov_deg[0]:g} x {eye.spec.fov_deg[1]:g} deg "
                           f"sees {what}")
     ranked = sorted(groups.items(), key=lambda kv: -kv[1])
-    (events, name), weight = ranked[0]
-    primary = chain_from_events(world, list(events), name)
-    ghost, ratio = None, None
-    for (ev, nm), w in ranked[1:]:
-        if nm == name:
-            ghost, ratio = chain_from_events(world, list(ev), nm), w / weight
-            break
-    return Chains(primary, ghost, name, ratio)
+    (events, name), _ = ranked[0]
+    ghost = next((chain_from_events(world, list(ev), nm) for (ev, nm), _ in ranked[1:] if nm == name), None)
+    return Chains(chain_from_events(world, list(events), name), ghost, name)
 
 
-def eye_points(dep: np.ndarray, frame: VehicleFrame, eyebox: np.ndarray, grid: tuple[int, int]) -> np.ndarray:
+def eyebox_offsets(eyebox: np.ndarray, grid: tuple[int, int]) -> np.ndarray:
     """(2, k) offsets (mm, right and up) of the eyebox grid, edges included, row by row from the top."""
     nx, ny = grid
     xs = np.linspace(-0.5, 0.5, nx) * eyebox[0] if nx > 1 else np.zeros(1)
@@ -288,23 +282,12 @@ def _signed_max(a) -> float | None:
 class Analysis:
     """The optical analysis of a world (see the module docstring); :meth:`run` gives optics.json's dict."""
 
-    def __init__(self, world, target: dict | None = None):
+    def __init__(self, world):
         self.world = world
-        self.target = dict(world.scene.target if target is None else target)
-        self.target.setdefault("eyebox_mm", np.array([130.0, 50.0]))
-        self.target.setdefault("ipd_mm", 65.0)
-        self.target.setdefault("up", np.array([0.0, 0.0, 1.0]))
-        self.target.setdefault("field_grid", (5, 3))
-        self.target.setdefault("eye_grid", (9, 5))
+        # the scene's target block over the format's defaults (a loaded scene has them already)
+        self.target = {f.name: f.default for f in TARGET.fields if f.default is not None} | world.scene.target
         eye = world.eye
-        up = np.asarray(self.target["up"], dtype=np.float64)
-        fwd = self.target.get("forward")
-        if fwd is None:
-            fwd = eye.gaze - (eye.gaze @ up) * up
-            if np.linalg.norm(fwd) < 1e-6:
-                raise SceneError(_scene_file(world.scene), "target.forward", "the eye looks straight up or down, "
-                                 "so its gaze gives no forward direction: give the vehicle's forward")
-        self.frame = VehicleFrame.make(np.asarray(fwd, dtype=np.float64), up)
+        self.frame = VehicleFrame(*vehicle_axes(world.scene))
         self.dep = np.asarray(eye.position, dtype=np.float64)
         self.chains = find_chains(world, self.target.get("pgu"))
         try:
@@ -312,7 +295,7 @@ class Analysis:
         except OpticsError as e:
             if self.target.get("pgu") is None:
                 raise
-            raise SceneError(_scene_file(world.scene), "target.pgu", str(e)) from None
+            raise SceneError(world.scene.file, "target.pgu", str(e)) from None
         self.primary = Imaging(world, self.chains.primary, self.pgu.plane, self.frame)
         self.ghost = Imaging(world, self.chains.ghost, self.pgu.plane, self.frame) if self.chains.ghost else None
         self._scan = None
@@ -497,8 +480,7 @@ class Analysis:
         if eyebox:
             t1 = time.perf_counter()
             tid = out["target"]["distance_mm"]["value"]
-            offsets = eye_points(self.dep, self.frame, np.asarray(self.target["eyebox_mm"], dtype=np.float64),
-                                 self.target["eye_grid"])
+            offsets = eyebox_offsets(np.asarray(self.target["eyebox_mm"], dtype=np.float64), self.target["eye_grid"])
             eyes = self.eye_points(field, design, offsets, tid)
             pairs = self.pairs(field, offsets, eyes, tid)
             box = self._eyebox(offsets, eyes, pairs)
@@ -719,14 +701,11 @@ def check_requirements(scene, eyebox: bool = True) -> None:
         try:
             check_metric(names, repr(req.text))
         except OpticsError as e:
-            raise SceneError(_scene_file(scene), f"target.requirements[{i}]", str(e)) from None
+            raise SceneError(scene.file, f"target.requirements[{i}]", str(e)) from None
         if names[0] == "eyebox" and not eyebox:
-            raise SceneError(_scene_file(scene), f"target.requirements[{i}]",
+            raise SceneError(scene.file, f"target.requirements[{i}]",
                              f"{req.text!r} is judged over the eyebox, which this run leaves out (--no-eyebox)")
 
-
-def _scene_file(scene) -> str:
-    return str(Path(scene.root) / scene.file)
 
 
 def _exact_objects(world, chains: Chains) -> list[str]:

@@ -6,6 +6,12 @@ line can print one clear line and exit with status 2 (see :mod:`tracer.cli`).
 
 from __future__ import annotations
 
+import signal
+
+#: The signals that stop a render, a sweep or a scan (Ctrl-C, a batch scheduler's time limit, a
+#: terminal's hang-up), where the platform has them.
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
 
 class TracerError(Exception):
     """Base class of every error the tracer raises on purpose."""

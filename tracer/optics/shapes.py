@@ -166,3 +166,21 @@ SHAPES: dict[str, tuple[Schema, callable]] = {
                                            "i + j from 1 to 10"))),
         lambda p: XYPolynomial(Conic(_curvature(p["radius_mm"]), p["conic"]), p["terms"])),
 }
+
+
+def frame_matrix(origin, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The 4 x 4 map from a shape's frame to the coordinates ``origin``, unit ``z`` and unit ``x`` (square
+    to it) are given in: columns x, z x x, z and the origin."""
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, origin
+    return m
+
+
+def surface_frame(origin, axis, x_axis) -> np.ndarray:
+    """:func:`frame_matrix` of a surface block's origin, ``axis`` (+z) and ``x_axis`` (+x, made square
+    to it); the axes must not be parallel (the loader checks a block's, tracer.scene.surfaces)."""
+    z = np.asarray(axis, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    x = np.asarray(x_axis, dtype=np.float64)
+    x = x - (x @ z) * z
+    return frame_matrix(origin, z, x / np.linalg.norm(x))

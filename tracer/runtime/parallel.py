@@ -38,7 +38,7 @@ import time
 import types
 from pathlib import Path
 
-from ..core.errors import StoppedBeforeFirstBatch
+from ..core.errors import STOP_SIGNALS, StoppedBeforeFirstBatch
 from ..core.validate import check_workers
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import drive
@@ -50,8 +50,6 @@ from .allocator import keep_freed_memory
 _WORKER: dict = {}
 #: Why a render stopped while its workers started.
 STOPPED_AT_START = "stopped while the worker processes started, before the first batch ended"
-#: The stop signals a worker leaves to its parent (where the platform has them).
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 #: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
 READY = "ready"
 #: Seconds the parent waits for its workers to start.

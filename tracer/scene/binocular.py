@@ -11,25 +11,33 @@ import dataclasses
 
 import numpy as np
 
+from ..core.errors import SceneError
 from .model import EyeSpec, Scene
 
 #: The eye a render sees through: the scene's own (the design eye point), or one of a pair's.
 SIDES = ("centre", "left", "right")
 
 
-def right_axis(scene: Scene) -> np.ndarray:
-    """The vehicle's right (unit (3,) world vector): forward x up."""
+def vehicle_axes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The vehicle's axes (unit (3,) world vectors: forward, right, up) that the optical analysis reads
+    angles in and its pairs of eyes lie along: ``target.up`` (the world's z), and ``target.forward`` or
+    else the eye's gaze, made horizontal. Raises :class:`~tracer.core.errors.SceneError` naming
+    ``target.forward`` where it is absent and the gaze is vertical."""
     t = scene.target
     up = np.asarray(t.get("up", (0.0, 0.0, 1.0)), dtype=np.float64)
     up = up / np.linalg.norm(up)
-    forward = t.get("forward")
-    if forward is None:
-        gaze = np.asarray(scene.eye.gaze, dtype=np.float64)
-        forward = gaze - (gaze @ up) * up
-        if np.linalg.norm(forward) < 1e-6:
-            raise ValueError("the eye looks straight up or down: give target.forward for its pair of eyes")
-    right = np.cross(np.asarray(forward, dtype=np.float64), up)
-    return right / np.linalg.norm(right)
+    forward = np.asarray(t["forward"] if t.get("forward") is not None else scene.eye.gaze, dtype=np.float64)
+    forward = forward - (forward @ up) * up
+    if np.linalg.norm(forward) < 1e-6:
+        raise SceneError(scene.file, "target.forward", "the eye looks straight up or down, so its gaze gives no "
+                                                      "forward direction: give the vehicle's forward")
+    forward = forward / np.linalg.norm(forward)
+    return forward, np.cross(forward, up), up
+
+
+def right_axis(scene: Scene) -> np.ndarray:
+    """The vehicle's right (unit (3,) world vector): :func:`vehicle_axes`'s."""
+    return vehicle_axes(scene)[1]
 
 
 def eye_for(scene: Scene, side: str) -> EyeSpec:

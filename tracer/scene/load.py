@@ -52,7 +52,7 @@ from .meshes import check_closed_outward, load_mesh
 from .methods import parse_methods
 from .model import Aim, EyeSpec, Material, Scene, SceneObject
 from .surfaces import load_surfaces
-from .windshield import WINDSHIELD, windshield_mesh
+from .windshield import WINDSHIELD, radius_problem, windshield_mesh
 
 #: The pupil's first guess when it follows the image and the environment is black: a lit interior, cd/m^2.
 FIRST_GUESS_CD_M2 = 100.0
@@ -278,11 +278,8 @@ def _windshield(ck: FieldChecker, o: dict, fld: str, mat: Material):
     if o.get("surfaces") is not None:
         ck.fail(f"{fld}.surfaces", "a windshield brings its own surfaces")
     p = parse_block(ck, o["windshield"], where, WINDSHIELD.fields)
-    for key in ("radius_x_mm", "radius_y_mm"):
-        least = 0.5 * max(p["size_mm"])
-        if 0 < abs(p[key]) < least:
-            ck.fail(f"{where}.{key}", f"|radius| must be 0 (flat) or at least half the size ({least:g} mm), got "
-                                      f"{p[key]:g}")
+    if (bad := radius_problem(p)) is not None:
+        ck.fail(f"{where}.{bad[0]}", bad[1])
     try:
         v, f, specs = windshield_mesh(p)
     except ValueError as e:

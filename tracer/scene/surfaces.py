@@ -18,7 +18,7 @@ import numpy as np
 from ..core.schema import parse_block
 from ..core.validate import FieldChecker
 from ..optics.materials import MATERIALS
-from ..optics.shapes import MAX_CURVATURE, SHAPES, distance
+from ..optics.shapes import MAX_CURVATURE, SHAPES, distance, frame_matrix
 from .format import SURFACE
 from .model import Surface
 
@@ -57,10 +57,7 @@ def _frame(ck: FieldChecker, params: dict, fld: str) -> np.ndarray:
     xn = float(np.linalg.norm(x))
     if xn < 1e-6 * max(float(np.linalg.norm(params["x_axis"])), 1e-300):
         ck.fail(f"{fld}.x_axis", "must not be parallel to axis")
-    x = x / xn
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, params["origin"]
-    return m
+    return frame_matrix(params["origin"], z, x / xn)
 
 
 def load_surfaces(ck: FieldChecker, specs, fld: str, obj_name: str, material_type: str, emits: bool,

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..core.schema import Field
-from ..optics.shapes import SHAPES
+from ..optics.shapes import SHAPES, surface_frame
 
 #: A facet's sagitta, mm, that the default mesh keeps below (a square cell of side h on radius R: h^2 / (4 R)
 #: over its diagonal).
@@ -83,16 +83,6 @@ def _surface_specs(p: dict) -> list[dict]:
             shape(depth + t) | {"origin": [0.0, 0.0, -depth - t], "axis": axis_out, "x_axis": [1.0, 0.0, 0.0]}]
 
 
-def _frame(spec: dict) -> np.ndarray:
-    z = np.asarray(spec.get("axis", [0.0, 0.0, 1.0]), dtype=np.float64)
-    z /= np.linalg.norm(z)
-    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
-    x /= np.linalg.norm(x)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, spec["origin"]
-    return m
-
-
 def _shape(spec: dict):
     schema, make = SHAPES[spec["type"]]
     params = {f.name: spec.get(f.name, f.default) for f in schema.fields}
@@ -101,7 +91,8 @@ def _shape(spec: dict):
 
 def _on_surface(spec: dict, x: np.ndarray, y: np.ndarray, z0: np.ndarray) -> np.ndarray:
     """z (n,) such that (x, y, z) lies on the surface ``spec``: Newton's method along z from ``z0``."""
-    inv = np.linalg.inv(_frame(spec))
+    inv = np.linalg.inv(surface_frame(spec["origin"], spec.get("axis", (0.0, 0.0, 1.0)),
+                                      spec.get("x_axis", (1.0, 0.0, 0.0))))
     shape = _shape(spec)
     z = z0.copy()
     a, b = inv[:3, :3], inv[:3, 3:4]
@@ -115,6 +106,16 @@ def _on_surface(spec: dict, x: np.ndarray, y: np.ndarray, z0: np.ndarray) -> np.
         if np.abs(step).max() < 1e-12:
             break
     return z
+
+
+def radius_problem(p: dict) -> tuple[str, str] | None:
+    """(field, what is wrong) where a radius of the parsed block ``p`` is neither 0 (flat) nor at least
+    half the outline's larger side (a shell that closes on itself), else None."""
+    least = 0.5 * max(p["size_mm"])
+    for key in ("radius_x_mm", "radius_y_mm"):
+        if 0 < abs(p[key]) < least:
+            return key, f"|radius| must be 0 (flat) or at least half the size ({least:g} mm), got {p[key]:g}"
+    return None
 
 
 def cells_for(p: dict) -> tuple[int, int]:
