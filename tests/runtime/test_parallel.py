@@ -18,24 +18,24 @@ def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_w
     processes (about 130 MiB each) on a 24 GiB machine. Workers whose memory together passes half of
     the machine's are refused in one line naming --workers, the estimate and how many fit, before any
     process starts; workers beyond the CPUs render with a warning. Here on a machine of 1 GiB: 8
-    workers of analytic-mirror at 16 x 12 pixels (about 128 MiB each) need 1.0 GiB."""
+    workers of analytic-mirror at 16 x 12 pixels (about 128 MiB each) and the process that merges their
+    batches need 1.1 GiB."""
     import tracer.core.validate
-
-    out, before = earlier
-    monkeypatch.setattr(tracer.core.validate, "physical_memory_bytes", lambda: 1 << 30)
-    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
-    assert_one_line_error(code, err, "--workers", "8 processes need about 1.0 GiB", "16 x 12", "at most 3 here")
-    assert hashes(out) == before
-    cpus = tracer.core.validate.available_cpus()
-    assert cli.check_workers(cpus, (16, 12)) is None
-    assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
-    # The library refuses them too, before its pilot and any worker process.
     from tracer.methods import INTEGRATORS, Budget
     from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
-    with pytest.raises(tracer.core.validate.WorkersError, match="at most 3 here"):
+    out, before = earlier
+    monkeypatch.setattr(tracer.core.validate, "physical_memory_bytes", lambda: 1 << 30)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 8, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "--workers", "8 processes need about 1.1 GiB", "16 x 12", "at most 2 here")
+    assert hashes(out) == before
+    with pytest.raises(tracer.core.validate.WorkersError, match="at most 2 here"):  # the library refuses them too
         render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=10**12), workers=8)
+    monkeypatch.setattr(tracer.core.validate, "physical_memory_bytes", lambda: 1 << 40)
+    cpus = tracer.core.validate.available_cpus()
+    assert cli.check_workers(cpus, (16, 12)) is None
+    assert f"on {cpus} CPUs" in cli.check_workers(cpus + 1, (16, 12))
 
 
 @pytest.mark.slow

@@ -69,37 +69,87 @@ def _add(total: np.ndarray, a) -> None:
         total += a
 
 
+def _columns(cols: np.ndarray, a: np.ndarray, npix: int):
+    """A batch's per-pixel array ``a`` (..., m) over the columns ``cols`` (m,) of the film, as it travels:
+    its non-zero columns (:class:`Columns`) where they are fewer than :data:`SPARSE_SHARE` of the film's
+    ``npix`` pixels, else the whole array (zeros elsewhere)."""
+    nz = np.flatnonzero(a if a.ndim == 1 else a.any(axis=0))
+    if len(nz) < SPARSE_SHARE * npix:
+        return Columns(cols[nz], a[..., nz])
+    out = np.zeros(a.shape[:-1] + (npix,))
+    out[..., cols] = a
+    return out
+
+
 class _Replicates:
-    """The replicate sums of one group of components: per pixel the sums over replicates of Y(m_r) and
-    of its square, the sums of the replicates' image means and of their squares, and their count."""
+    """The replicate sums of one group of components: per pixel the sum over replicates of Y(m_r)^2
+    (the sum of Y(m_r) is the image's own luminance times the count: every replicate has an equal
+    share of the normaliser), the sums of the replicates' image means and of their squares, and their
+    count: a number where every replicate covers the whole image, or per pixel (``pixel_count``) where
+    batches cover part of it (a backward batch of fewer samples than pixels: one sample per pixel it
+    covers, each a replicate of that pixel)."""
 
     def __init__(self, n: int):
-        self.sum = np.zeros(n)
         self.sq = np.zeros(n)
         self.mean_sum = 0.0
         self.mean_sq = 0.0
         self.count = 0
+        self.pixel_count: np.ndarray | None = None
 
-    def add(self, images: np.ndarray | None, replicates: int):
-        """Add the (R, pixels) replicate images of one batch (None: nothing landed)."""
-        if images is not None:
-            self.sum += images.sum(axis=0)
-            self.sq += (images * images).sum(axis=0)
-            means = images.mean(axis=1)
-            self.mean_sum += float(means.sum())
-            self.mean_sq += float((means * means).sum())
-        self.count += replicates
+    def counts(self):
+        """Replicates per pixel: the count, plus ``pixel_count`` where batches cover part of the image."""
+        return self.count if self.pixel_count is None else self.pixel_count + self.count
 
-    def arrays(self) -> tuple:
-        return _pack(self.sum), _pack(self.sq), self.mean_sum, self.mean_sq, self.count
+    def fewest(self) -> int:
+        return int(self.count if self.pixel_count is None else self.pixel_count.min() + self.count)
 
     def merge(self, data: tuple):
-        s, sq, mean_sum, mean_sq, count = data
-        _add(self.sum, s)
+        sq, mean_sum, mean_sq, count, covered = data
         _add(self.sq, sq)
         self.mean_sum += mean_sum
         self.mean_sq += mean_sq
         self.count += count
+        if covered is not None:
+            if self.pixel_count is None:
+                self.pixel_count = np.zeros(len(self.sq), np.int32)
+            self.pixel_count[covered] += 1
+
+
+def batch_arrays(components: list[str], npix: int, splats: Splats, replicates: int, normalisers: dict) -> tuple:
+    """A batch's film as it travels (:meth:`Film.merge_arrays` adds it), built over the pixels it touches
+    only, so that a batch costs memory by its samples, not by the retina's pixels: per component its
+    RGB sums and the sums over replicates of each replicate's Y squared, its normaliser, and the
+    group's replicate sums. ``normalisers[c]`` is the batch's normaliser total of component c (every
+    replicate an equal share), or the flat pixels (k,) that the batch sampled once each (a batch that
+    covers part of the image: then ``replicates`` is 1, and each sampled pixel's count grows by one).
+    The numbers are those of adding each splat to a whole-image array, bit for bit: the sums run over
+    the same values in the same order."""
+    gathered = {k: splats.gather(k) for k in components}
+    covered = next((v for v in normalisers.values() if isinstance(v, np.ndarray)), None)
+    parts = [g[0] for g in gathered.values()] + ([covered] if covered is not None else [])
+    cols = np.unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
+    m = len(cols)
+    sums, norms, sq_c, total = [], [], [], None
+    for name in components:
+        pixels, rep, values = gathered[name]
+        local = np.searchsorted(cols, pixels)
+        s = np.zeros((3, m))
+        if len(pixels):
+            for c in range(3):
+                s[c] = np.bincount(local, weights=values[c], minlength=m)
+        norm = normalisers.get(name, 0)
+        per_replicate = 1.0 if isinstance(norm, np.ndarray) else max(norm, 1) / replicates
+        images = replicate_images(local, rep, values, replicates, m, per_replicate)
+        sums.append(_columns(cols, s, npix))
+        norms.append(norm if isinstance(norm, np.ndarray) else int(norm))
+        sq_c.append(_columns(cols, (images * images).sum(axis=0), npix))
+        total = images if total is None else total + images
+    if total is None:
+        total = np.zeros((replicates, m))
+    means = total.sum(axis=1) / npix
+    group = (_columns(cols, (total * total).sum(axis=0), npix), float(means.sum()), float((means * means).sum()),
+             0 if covered is not None else replicates, covered)
+    return components, sums, norms, sq_c, {"": group}
 
 
 class Film:
@@ -113,6 +163,9 @@ class Film:
         channels of the hybrid method, each traced by its own method on its own random streams) form
         groups; each group keeps its own replicate sums, and the variances of independent groups add.
         By default every component is in one group "".
+
+    A component's normaliser is a number (particles emitted, or samples through every pixel) or, once
+    batches that cover part of the image were merged, a count per pixel (samples through that pixel).
     """
 
     def __init__(self, width: int, height: int, components: dict[str, str], groups: dict[str, str] | None = None):
@@ -122,9 +175,8 @@ class Film:
         self.group_of = {name: (groups or {}).get(name, "") for name in components}
         self.groups = {g: _Replicates(n) for g in dict.fromkeys(self.group_of.values())}
         self.sums = {name: np.zeros((3, n)) for name in components}  # RGB, (3, pixels)
-        self.norm = dict.fromkeys(components, 0)  # the normaliser's total
-        self.comp_rep_sum = {name: np.zeros(n) for name in components}  # per component, for its own error
-        self.comp_rep_sq = {name: np.zeros(n) for name in components}
+        self.norm: dict[str, int | np.ndarray] = dict.fromkeys(components, 0)  # the normaliser's total
+        self.comp_rep_sq = {name: np.zeros(n) for name in components}  # per component, for its own error
 
     @property
     def pixels(self) -> int:
@@ -132,19 +184,28 @@ class Film:
 
     @property
     def replicates(self) -> int:
-        """Replicates recorded, over every group."""
-        return sum(g.count for g in self.groups.values())
+        """Replicates recorded, over every group (per pixel where batches cover part of the image: the
+        fewest any pixel holds)."""
+        return sum(g.fewest() for g in self.groups.values())
 
     @property
     def fewest_replicates(self) -> int:
-        """The replicates of the group that has fewest (an error needs two in every group)."""
-        return min((g.count for g in self.groups.values()), default=0)
+        """The replicates of the group that has fewest (an error needs two in every group), per pixel where
+        batches cover part of the image."""
+        return min((g.fewest() for g in self.groups.values()), default=0)
 
     @property
-    def rep_sum(self) -> np.ndarray:
-        """Per pixel, the sums over replicates of Y(m_r), over every group."""
-        return sum((g.sum for g in self.groups.values()), start=np.zeros(self.pixels)) if len(self.groups) > 1 \
-            else next(iter(self.groups.values())).sum
+    def partial_coverage(self) -> bool:
+        """Whether some group's batches covered part of the image (its counts are per pixel)."""
+        return any(g.pixel_count is not None for g in self.groups.values())
+
+    def sample_counts(self) -> np.ndarray | None:
+        """(H, W) the fewest samples any group took through each pixel where batches covered part of the
+        image, else None (every pixel had the same)."""
+        counts = [g.counts() for g in self.groups.values() if g.pixel_count is not None]
+        if not counts:
+            return None
+        return np.minimum.reduce([np.broadcast_to(c, (self.pixels,)) for c in counts]).reshape(self.height, self.width)
 
     @property
     def rep_sq(self) -> np.ndarray:
@@ -154,45 +215,47 @@ class Film:
 
     # -- filling (one batch) ---------------------------------------------------------------------
     def record_batch(self, splats: Splats, replicates: int, normalisers: dict[str, int], group: str = ""):
-        """Add one batch of the components of ``group``: its ``splats``, made of ``replicates``
-        replicates, with the batch's normaliser total of each component (every replicate has an equal
-        share of it)."""
-        total = None
-        for name in self.kinds:
-            if self.group_of[name] != group:
-                continue
-            pixels, rep, values = splats.gather(name)
-            norm = normalisers.get(name, 0)
-            if len(pixels):
-                s = self.sums[name]
-                for c in range(3):
-                    s[c] += np.bincount(pixels, weights=values[c], minlength=self.pixels)
-            images = replicate_images(pixels, rep, values, replicates, self.pixels, max(norm, 1) / replicates)
-            self.comp_rep_sum[name] += images.sum(axis=0)
-            self.comp_rep_sq[name] += (images * images).sum(axis=0)
-            total = images if total is None else total + images
-            self.norm[name] += int(norm)
-        self.groups[group].add(total, replicates)
+        """Add one batch of the components of ``group`` (see :func:`batch_arrays`)."""
+        names = [k for k in self.kinds if self.group_of[k] == group]
+        self.merge_arrays(batch_arrays(names, self.pixels, splats, replicates, normalisers), group=group)
 
     # -- merging ---------------------------------------------------------------------------------
     def arrays(self) -> tuple:
-        """Everything a batch contributes, as arrays and numbers (what workers send back); each
-        per-pixel array whole or as its non-zero columns (:func:`_pack`)."""
+        """Everything this film holds, as arrays and numbers (:meth:`merge_arrays` adds it to another);
+        each per-pixel array whole or as its non-zero columns."""
         names = list(self.kinds)
-        return (names, [_pack(self.sums[k]) for k in names], [self.norm[k] for k in names],
-                [_pack(self.comp_rep_sum[k]) for k in names], [_pack(self.comp_rep_sq[k]) for k in names],
-                {g: r.arrays() for g, r in self.groups.items()})
+        every = np.arange(self.pixels)
+
+        def norm(k):
+            v = self.norm[k]
+            return v if not isinstance(v, np.ndarray) else Columns(every, v)
+
+        groups = {}
+        for g, r in self.groups.items():
+            if r.pixel_count is not None:
+                raise ValueError("a film whose batches covered part of the image merges batch by batch")
+            groups[g] = (_pack(r.sq), r.mean_sum, r.mean_sq, r.count, None)
+        return (names, [_pack(self.sums[k]) for k in names], [norm(k) for k in names],
+                [_pack(self.comp_rep_sq[k]) for k in names], groups)
 
     def merge_arrays(self, data: tuple, prefix: str = "", group: str | None = None):
-        """Add another film's :meth:`arrays`; with ``prefix``, its components are this film's
-        ``prefix + name``, and with ``group`` its replicate sums go to that group of this film (the
-        hybrid method merges each channel's own film so)."""
-        names, sums, norms, c_sum, c_sq, groups = data
+        """Add a batch's arrays (:func:`batch_arrays`) or another film's (:meth:`arrays`); with ``prefix``,
+        its components are this film's ``prefix + name``, and with ``group`` its replicate sums go to that
+        group of this film (the hybrid method merges each channel's batch so)."""
+        names, sums, norms, c_sq, groups = data
         for i, k in enumerate(names):
             k = prefix + k
             _add(self.sums[k], sums[i])
-            self.norm[k] += norms[i]
-            _add(self.comp_rep_sum[k], c_sum[i])
+            n = norms[i]
+            if isinstance(n, (np.ndarray, Columns)):
+                if not isinstance(self.norm[k], np.ndarray):
+                    self.norm[k] = np.full(self.pixels, self.norm[k], np.int64)
+                if isinstance(n, Columns):
+                    self.norm[k][n.idx] += n.values
+                else:
+                    self.norm[k][n] += 1
+            else:
+                self.norm[k] += n
             _add(self.comp_rep_sq[k], c_sq[i])
         for g, rep in groups.items():
             self.groups[g if group is None else group].merge(rep)
@@ -201,10 +264,13 @@ class Film:
         self.merge_arrays(other.arrays())
 
     # -- results ---------------------------------------------------------------------------------
+    def _divided(self, name: str) -> np.ndarray:
+        n = self.norm[name]
+        return self.sums[name] / (np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1))
+
     def component_rgb(self, name: str) -> np.ndarray:
         """(H, W, 3) one component's estimate, cd/m^2."""
-        s = self.sums[name] / max(self.norm[name], 1)
-        return np.ascontiguousarray(s.T).reshape(self.height, self.width, 3)
+        return np.ascontiguousarray(self._divided(name).T).reshape(self.height, self.width, 3)
 
     def rgb(self, group: str | None = None) -> np.ndarray:
         """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
@@ -215,36 +281,55 @@ class Film:
                 out += self.component_rgb(name)
         return out
 
-    def _variance(self, s: np.ndarray, sq: np.ndarray, r: int) -> np.ndarray:
-        if r < 2:
+    def _y(self, names) -> np.ndarray:
+        """Flat (pixels,) luminance of the sum of the components ``names``."""
+        y = np.zeros(self.pixels)
+        for k in names:
+            y += luminance3(self._divided(k))
+        return y
+
+    def _variance(self, y: np.ndarray, sq: np.ndarray, r) -> np.ndarray:
+        """Per pixel, the variance of the mean of r replicates whose mean is y and whose squares sum to sq
+        (zero where fewer than two replicates exist)."""
+        r = np.asarray(r)
+        if r.ndim == 0 and r < 2:
             return np.zeros((self.height, self.width))
-        mean = s / r
-        var = np.maximum(sq / r - mean * mean, 0.0) * r / (r - 1)
-        return (var / r).reshape(self.height, self.width)
+        rr = np.maximum(r, 2)
+        var = np.maximum(sq / rr - y * y, 0.0) / (rr - 1)
+        return np.where(r >= 2, var, 0.0).reshape(self.height, self.width)
 
     def variance_y(self, group: str | None = None) -> np.ndarray:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
-        (zeros before two replicates exist): the sum over the independent groups (of ``group`` only,
-        when given)."""
+        (zero where fewer than two replicates exist): the sum over the independent groups (of ``group``
+        only, when given)."""
         out = np.zeros((self.height, self.width))
         for g, rep in self.groups.items():
             if group is None or g == group:
-                out = out + self._variance(rep.sum, rep.sq, rep.count)
+                names = [k for k in self.kinds if self.group_of[k] == g]
+                out = out + self._variance(self._y(names), rep.sq, rep.counts())
         return out
 
     def mean_standard_error(self, group: str | None = None) -> float:
-        """Standard error (cd/m^2) of the image's mean luminance, from the spread of the replicates'
-        image means (0 before two replicates exist); the groups' variances add."""
+        """Standard error (cd/m^2) of the image's mean luminance: from the spread of the replicates' image
+        means where replicates cover the whole image, else from the pixels' own variances (the pixels
+        of a camera method's image are independent estimates); 0 before two replicates exist. The
+        groups' variances add."""
         var = 0.0
         for g, rep in self.groups.items():
+            if group is not None and g != group:
+                continue
+            if rep.pixel_count is not None:
+                var += float(self.variance_y(g).sum()) / self.pixels**2
+                continue
             r = rep.count
-            if r >= 2 and (group is None or g == group):
+            if r >= 2:
                 mean = rep.mean_sum / r
                 var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
         return float(np.sqrt(var))
 
     def component_variance_y(self, name: str) -> np.ndarray:
-        return self._variance(self.comp_rep_sum[name], self.comp_rep_sq[name], self.groups[self.group_of[name]].count)
+        rep = self.groups[self.group_of[name]]
+        return self._variance(self._y([name]), self.comp_rep_sq[name], rep.counts())
 
 
 class Splats:

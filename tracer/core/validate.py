@@ -51,9 +51,13 @@ MAX_DISTANCE_MM = 1e12
 MIN_DISTANCE_MM = 10.0
 #: Most retina pixels (4096 x 4096).
 MAX_PIXELS = 1 << 24
-#: Memory a render takes per retina pixel and process, bytes (film sums, a batch's film, the image, its
-#: variance, preview and analysis; measured: 730 bytes on a 1024 x 1024 render, either method).
-BYTES_PER_PIXEL = 800
+#: Memory a render takes per retina pixel in the process that merges the batches and writes the outputs,
+#: bytes (the film's sums, the image, its variance, the preview and the EXR's planes; measured by
+#: benchmarks/budget.py, see docs/results/speed.md).
+BYTES_PER_PIXEL = 400
+#: Memory per retina pixel of a worker process, bytes: its pixels' extents and pass order; a batch's
+#: film is as large as its samples, not the image.
+WORKER_BYTES_PER_PIXEL = 32
 #: Memory a render's process takes besides its film, bytes: the interpreter, numpy, Embree, the tracer,
 #: the scene and a bounce's arrays (peaks less the film, `/usr/bin/time -v hud-trace render PRESET
 #: --method backward --rays 3000000 --workers 1`: 115 MiB on analytic-mirror, 195 MiB on hud-direct
@@ -88,13 +92,15 @@ def check_workers(workers: int, resolution: tuple[int, int]) -> str | None:
     Returns a warning where there are more workers than CPUs (they share them: more start-up time
     and memory, no more speed), else None."""
     w, h = resolution
-    each = PROCESS_BASE_BYTES + w * h * BYTES_PER_PIXEL
+    each = PROCESS_BASE_BYTES + w * h * WORKER_BYTES_PER_PIXEL
+    parent = PROCESS_BASE_BYTES + w * h * BYTES_PER_PIXEL
     memory = physical_memory_bytes()
-    if workers > 1 and memory is not None and workers * each > memory / 2:
-        raise WorkersError(f"{workers} processes need about {workers * each / 2**30:.1f} GiB (each holds the tracer, "
-                           f"the scene and a film of {w} x {h} pixels: about {each / 2**20:.0f} MiB); this machine "
-                           f"has {memory / 2**30:.1f} GiB (the limit is half of it): at most "
-                           f"{max(1, int(memory / 2 // each))} here")
+    if workers > 1 and memory is not None and parent + workers * each > memory / 2:
+        raise WorkersError(f"{workers} processes need about {(parent + workers * each) / 2**30:.1f} GiB (each holds "
+                           f"the tracer and the scene, about {each / 2**20:.0f} MiB at {w} x {h} pixels, besides the "
+                           f"{parent / 2**20:.0f} MiB of the process that merges their batches); this machine has "
+                           f"{memory / 2**30:.1f} GiB (the limit is half of it): at most "
+                           f"{max(1, int((memory / 2 - parent) // each))} here")
     cpus = available_cpus()
     if workers > cpus:
         return (f"--workers {workers} on {cpus} CPUs: processes beyond the CPUs share them (more start-up time and "

@@ -107,6 +107,7 @@ class BackwardTracer(Integrator, PathMethod):
         #: through which its light arrives ("light_aim"), the paper's directed split on the eye's side.
         self._eye_sampler = w.aimed_samplers(lambda o: o.material.light_aim)
         self.npix = self.eye.width * self.eye.height
+        self._pass_order: np.ndarray | None = None
         self.strata = None
         ep = self.opts.get("exit_pupil")
         a = self.eye.pupil_radius
@@ -171,7 +172,7 @@ class BackwardTracer(Integrator, PathMethod):
         sy = (1 - 2 * ((pix // w) + jit[1]) / h) * eye.half_y
         lens, lens_weight = self.lens_samples(rng, n)
         o, d, geo = eye.generate_rays(sx, sy, lens)
-        beta = np.broadcast_to((geo * (eye.pixel_area * lens_weight / eye.extent[pix])).astype(F32), (3, n)).copy()
+        beta = np.broadcast_to((geo * (eye.pixel_area * lens_weight / eye.extent_of(pix))).astype(F32), (3, n)).copy()
         extra = {"sample": np.arange(first, first + n), "splits": np.zeros(n, np.int8)}
         if self.world.polar is not None:  # the row vector of the eye's detector (and analyser)
             beta, pol = self.world.polar.start_camera(beta, d)
@@ -188,11 +189,37 @@ class BackwardTracer(Integrator, PathMethod):
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):
-        spp = max(1, self.batch_size // self.npix)
+        """A batch of at least as many paths as pixels: ``batch_size // pixels`` samples through every
+        pixel, each pass a replicate. A smaller batch: one sample through each pixel of its part of a
+        pass (:meth:`batch_pixels`), so that a render of a large retina can stop after any batch, with
+        fewer than one sample per pixel."""
+        if self.batch_size < self.npix:
+            pix = self.batch_pixels(ctx.batch)
+            found = self._run(ctx, pix, np.zeros(len(pix), np.int64))
+            return len(pix), found, {"hit": pix, "connection": pix}, 1
+        spp = self.batch_size // self.npix
         pix = np.tile(np.arange(self.npix), spp)
         rep = np.repeat(np.arange(spp), self.npix)
         found = self._run(ctx, pix, rep)
         return len(pix), found, {"hit": spp, "connection": spp}, spp
+
+    def batch_pixels(self, index: int) -> np.ndarray:
+        """The pixels (k,) of batch ``index`` where a batch is smaller than the image: a pass over the
+        pixels is cut into ceil(pixels / batch_size) equal parts, batch k takes part k mod parts of pass
+        k // parts, and the pass visits the pixels in the order i * step mod pixels (step near the
+        golden section of the pixel count and prime to it), so that the batches merged so far cover the
+        image evenly, a render stopped early has its samples spread over the whole retina, and batch
+        k's pixels depend on k alone (seed-addressed)."""
+        n = self.npix
+        parts = -(-n // self.batch_size)
+        size = -(-n // parts)
+        if self._pass_order is None:
+            step = int(round(n * 0.6180339887498949))
+            while math.gcd(step, n) != 1:
+                step += 1
+            self._pass_order = (np.arange(n, dtype=np.int64) * step) % n
+        part = index % parts
+        return self._pass_order[part * size:(part + 1) * size]
 
     def pilot_mean(self, ctx) -> float:
         """The image's mean luminance (cd/m^2) from one sample at each of ``batch_size`` random pixels."""
@@ -343,7 +370,12 @@ class BackwardTracer(Integrator, PathMethod):
 
     def finish(self, result):
         super().finish(result)
-        result.extra["samples_per_pixel"] = result.film.norm.get("hit", 0)
+        count = result.film.norm.get("hit", 0)
+        if isinstance(count, np.ndarray):  # batches smaller than the image: a count per pixel
+            result.extra["samples_per_pixel"] = float(count.mean())
+            result.extra["samples_per_pixel_range"] = [int(count.min()), int(count.max())]
+        else:
+            result.extra["samples_per_pixel"] = count
         result.extra["next_event"] = self.next_event
         film = result.film
         total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)

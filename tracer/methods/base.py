@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.film import Film, Splats
+from ..core.film import Film, Splats, batch_arrays
 from ..core.sampling import make_rng
 from ..core.units import luminance
 from ..scene.methods import MAX_DEPTH
@@ -42,8 +42,7 @@ PILOT_STREAM = 2**31 - 1
 PROBE_STREAM = 1
 #: Paths in a pilot.
 PILOT_PATHS = 1 << 14
-#: A render merges batches until every replicate group of its film holds this many replicates,
-#: whatever its budget: the error bars come from their spread (:func:`drive`).
+#: Replicates a pixel needs for its error bar (their spread); a render that stops with fewer says so.
 MIN_REPLICATES = 2
 #: With a budget in seconds and no batch size given, a batch is sized from the pilot's pace to take
 #: at most this share of the budget, so that the render ends within a few percent of it (a batch is
@@ -286,10 +285,9 @@ class Integrator:
         rays_before, truncated_before = self.world.rays_traced, self.truncated
         paths, found, norms, reps = self.run_batch(ctx)
         with timers("film"):
-            film = self.new_film()
-            film.record_batch(ctx.splats, reps, norms)
+            film = batch_arrays(list(self.components), self.eye.width * self.eye.height, ctx.splats, reps, norms)
         seconds = time.perf_counter() - t0
-        return BatchResult(index, film.arrays(), paths, found, self.world.rays_traced - rays_before,
+        return BatchResult(index, film, paths, found, self.world.rays_traced - rays_before,
                            self.truncated - truncated_before, seconds, timers.report(seconds), dict(ctx.store))
 
     def render(self, budget: Budget, progress: Progress | None = None, should_stop: ShouldStop | None = None,
@@ -328,7 +326,17 @@ class Integrator:
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
         film = result.film
-        if result.batches and film.groups and film.fewest_replicates < MIN_REPLICATES:  # a render stopped early
+        counts = film.sample_counts() if result.batches else None
+        if counts is not None and counts.min() < MIN_REPLICATES:  # batches covered part of the image
+            few = int((counts < MIN_REPLICATES).sum())
+            none = int((counts == 0).sum())
+            result.warnings.append(
+                f"the render stopped at {float(counts.mean()):.2f} samples per pixel: {few:,} of {counts.size:,} "
+                f"pixels hold fewer than {MIN_REPLICATES}, so their Y_var reads 0 and the standard errors leave "
+                "them out"
+                + (f"; {none:,} hold none and show their nearest sampled neighbour's value" if none else "")
+                + "; render longer for error bars on every pixel")
+        elif result.batches and film.groups and film.fewest_replicates < MIN_REPLICATES:  # a render stopped early
             result.warnings.append(
                 f"the error bars are not measured: the film holds {film.fewest_replicates} replicate(s) where their "
                 f"spread needs {MIN_REPLICATES}, so every standard error and Y_var reads 0; render longer")
@@ -344,7 +352,8 @@ class Integrator:
             return
         film = result.film
         npix = film.width * film.height
-        missing = sum(v / film.norm[c] for c, v in sums.items() if film.norm.get(c)) / npix
+        counts = {c: float(np.mean(film.norm.get(c, 0))) for c in sums}  # per pixel where batches covered part
+        missing = sum(v / counts[c] for c, v in sums.items() if counts[c] > 0) / npix
         mean = float(luminance(film.rgb()).mean())
         se = film.mean_standard_error()
         result.extra["max_depth_cut"] = {
@@ -397,11 +406,10 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     No batch is issued that cannot land within the budget: with a budget in seconds, none once the
     time left is shorter than a batch takes; with a budget in rays, none beyond the rays that the
     merged and running batches will already bring (estimated from the finished ones). When the
-    budget is met, batches still running are dropped, not awaited; but however short the budget, batches
-    are merged until every replicate group of the film holds :data:`MIN_REPLICATES` replicates (one
-    batch for most methods; two where a batch is one replicate, as a backward batch of fewer paths than
-    twice the pixels is), so that an image is never empty for lack of time and its error bars are
-    measured (they come from the replicates' spread, which one replicate does not have). A time budget counts
+    budget is met, batches still running are dropped, not awaited; but however short the budget, one
+    batch is merged, so that an image is never empty for lack of time (a batch may cover part of the
+    image: its error bars then hold where pixels have two samples, and the report says how many do not).
+    A time budget counts
     from ``started`` (``time.perf_counter()`` when the render began: the pilot and the workers'
     start-up are part of the wall time the user gave), by default from now. ``preview(film)`` is
     called with the merged film after a merge, at most every :data:`PREVIEW_SECONDS` (not after the
@@ -424,8 +432,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     workers = getattr(executor, "workers", 1)
 
     def short() -> bool:
-        """The film cannot measure its error yet: some group holds fewer than MIN_REPLICATES replicates."""
-        return merged == 0 or (bool(film.groups) and film.fewest_replicates < MIN_REPLICATES)
+        """No batch merged yet: a render holds at least one, however short its budget."""
+        return merged == 0
 
     def met() -> bool:
         return not short() and budget.fraction(rays, time.perf_counter() - start) >= 1.0

@@ -93,7 +93,7 @@ class ForwardTracer(Integrator, PathMethod):
             self.warnings.append("forward tracing does not emit from the environment: render it with the backward "
                                  "method, or with the hybrid method, which adds it to this method's HUD channel")
         self.particles = Particles(w)
-        self.min_extent = float(self.eye.extent.min())
+        self.min_extent = self.eye.smallest_extent
         #: Particles on the retina per particle emitted in the pilot (tracer.methods.base).
         self.pilot_efficiency = 0.0
         #: When a list, the sensor stage appends (particle ids (k,), points (3, k) mm, reached_eye (k,)
@@ -144,7 +144,7 @@ class ForwardTracer(Integrator, PathMethod):
             polar = self.world.polar
             if polar is not None:  # the eye's detector (and its analyser) takes the Stokes vector
                 value = polar.detect(value, arrived.extra, arrived.d)
-            ctx.splats.add("light", pix, arrived.rep, value / eye.extent[pix])
+            ctx.splats.add("light", pix, arrived.rep, value / eye.extent_of(pix))
         return at
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):

@@ -298,13 +298,16 @@ class _Channels(Integrator):
     def trace_batch(self, index: int) -> BatchResult:
         """Batch ``index`` of every channel, merged into one film (components "<prefix><name>", one
         replicate group per channel); each channel's figures are kept apart in ``extra``."""
-        film = self.new_film()
+        names, sums, norms, sq, groups = [], [], [], [], {}
         total = BatchResult(index, None, 0, 0, 0, 0, 0.0, {}, {})
         for c in self.channels:
             if c.integrator is None or index % c.every:
                 continue
             b = c.integrator.trace_batch(index // c.every)
-            film.merge_arrays(b.film, prefix=c.prefix, group=c.group)
+            c_names, c_sums, c_norms, c_sq, c_groups = b.film  # one group, "": the channel's own
+            names += [c.prefix + k for k in c_names]
+            sums, norms, sq = sums + c_sums, norms + c_norms, sq + c_sq
+            groups[c.group] = c_groups[""]
             total.paths += b.paths
             total.found += b.found
             total.rays += b.rays
@@ -320,7 +323,7 @@ class _Channels(Integrator):
                 total.extra[k] = total.extra.get(k, 0) + v
             for k, v in (("rays", b.rays), ("paths", b.paths), ("found", b.found), ("seconds", b.seconds)):
                 total.extra[f"channel_{k}:{c.name}"] = v
-        total.film = film.arrays()
+        total.film = (names, sums, norms, sq, groups)
         return total
 
     def run_batch(self, ctx):

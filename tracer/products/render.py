@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.aims import aim_preflight
-from ..analysis.brightness import brightness_theorem
+from ..analysis.aims import aim_preflight, aim_warnings
+from ..analysis.brightness import brightness_theorem, missing_light_warnings
 from ..analysis.hud import hud_figures
 from ..analysis.optics import check_requirements, optics_block
 from ..analysis.sections import find_sections
@@ -29,6 +29,7 @@ from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
 from ..core.imageio import read_exr_channels, read_image, write_exr, write_png
 from ..core.units import luminance
 from ..methods import INTEGRATORS, Budget, RenderResult
+from ..methods.base import MIN_REPLICATES
 from ..optics.pupil import pupil_diameter_mm
 from ..runtime.parallel import render_parallel
 from ..scene import Scene, load_scene
@@ -165,41 +166,53 @@ class Products:
         return output_files(self.channels, self.attrs, self.preview, self.report)
 
 
+def _nearest(known: np.ndarray) -> np.ndarray:
+    """For each position along the last axis of ``known`` (..., n), the index of the nearest known one
+    along that axis (the left one on a tie; n where the line has none)."""
+    n = known.shape[-1]
+    at = np.arange(n)
+    left = np.maximum.accumulate(np.where(known, at, -1), axis=-1)
+    right = np.minimum.accumulate(np.where(known, at, n)[..., ::-1], axis=-1)[..., ::-1]
+    return np.where((left >= 0) & ((right >= n) | (at - left <= right - at)), left, right)
+
+
+def fill_unsampled(image: np.ndarray, missing: np.ndarray) -> int:
+    """Give the pixels ``missing`` (H, W) of ``image`` (H, W, 3), which no sample reached (a render that
+    stopped before one sample per pixel), the value of the nearest sampled pixel of their row, or of the
+    nearest row that has one (their Y_var stays 0: unmeasured). Returns how many were missing."""
+    count = int(missing.sum())
+    if count == 0 or count == missing.size:
+        return count
+    known = ~missing
+    col = _nearest(known)  # (H, W)
+    row = _nearest(known.any(axis=1))  # (H,)
+    ys, xs = np.nonzero(missing)
+    src_y = row[ys]
+    image[ys, xs] = image[src_y, col[src_y, xs]]
+    return count
+
+
 def render_products(world: World, integrator, result: RenderResult, budget: Budget, analyse: bool = True) -> Products:
-    """The image, report and EXR contents of a finished render (see :class:`Products`). The
-    brightness-theorem analysis and the HUD figures run unless ``analyse`` is false or the render was
-    stopped early (``result.partial``: a stop must end promptly); their time is not part of the budget.
-    An image made of channels (the hybrid method: film groups) also gets each channel as EXR layer
-    ``<channel>.R, .G, .B, .Y, .Y_var``, and its HUD figures read the symbols off the HUD channel and
-    the background behind them off the environment channel."""
+    """The image, report and EXR contents of a finished render (see :class:`Products`), with the
+    analysis (:func:`add_analysis`) unless ``analyse`` is false. An image made of channels (the hybrid
+    method: film groups) also gets each channel as EXR layer ``<channel>.R, .G, .B, .Y, .Y_var``.
+    Pixels that no sample reached (a render stopped before one sample per pixel) show their nearest
+    sampled neighbour's value (:func:`fill_unsampled`); the report's ``image.samples_per_pixel`` says
+    how many."""
     scene = world.scene
     film = result.film
     image = film.rgb()
     var_y = film.variance_y()
+    counts = film.sample_counts()
+    unsampled = fill_unsampled(image, counts == 0) if counts is not None else 0
     y = luminance(image)
     mode = world.eye.spec.adaptation
     preview, info = tonemap_ward(image, adaptation_luminance(y, mode))
     info["adaptation_mode"] = mode
     channels_y = {g: luminance(film.rgb(g)) for g in film.groups if g}
-    analysis = figures = None
-    if analyse and world.accel is not None and not result.partial:
-        t0 = time.perf_counter()
-        sections = find_sections(world)
-        analysis = brightness_theorem(world, y, var_y, integrator.renders_environment, sections)
-        analysis["seconds"] = time.perf_counter() - t0
-        figures = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
-            if "hud" in channels_y else hud_figures(world, y, sections=sections)
-    report = build_report(scene, result, image, var_y, info, budget, analysis, integrator.efficiency_definition)
+    report = build_report(scene, result, image, var_y, info, budget, None, integrator.efficiency_definition)
     report["polarisation"] = world.polarisation_report()
-    report["hud"] = figures
-    # the optical analysis from the scene's own eye (the design eye point), whichever eye rendered
-    own_eye = world.eye.spec is scene.eye
-    report["optics"] = clean(optics_block(scene, world if own_eye else None)) \
-        if analyse and world.accel is not None and not result.partial else None
-    if report["optics"] is not None:
-        report["warnings"] += [f"optics: {w}" for w in report["optics"].get("warnings", [])]
-        if "error" in report["optics"] and "target" in scene.raw:  # asked for, and not possible
-            report["warnings"].append(f"optics: {report['optics']['error']}")
+    report["hud"] = report["optics"] = None
     run_id = uuid.uuid4().hex
     report = {"run_id": run_id} | report
     attrs = {"hud:method": result.method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
@@ -215,7 +228,55 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
         channels |= {f"{g}.R": rgb[..., 0], f"{g}.G": rgb[..., 1], f"{g}.B": rgb[..., 2], f"{g}.Y": channels_y[g],
                      f"{g}.Y_var": film.variance_y(g)}
     report["image"]["channels"] = list(channels)
-    return Products(image, y, var_y, preview, report, channels, attrs)
+    if counts is not None:
+        report["image"]["samples_per_pixel"] = {"mean": float(counts.mean()), "min": int(counts.min()),
+                                                "max": int(counts.max()), "unsampled_pixels": unsampled}
+    pending = world.accel is not None and not result.partial
+    report["analysis"] = "pending" if pending else "not run"  # what add_analysis adds: "done"
+    report["analysis_seconds"] = None
+    products = Products(image, y, var_y, preview, report, channels, attrs)
+    if analyse:
+        add_analysis(products, world, integrator, result)
+    return products
+
+
+def add_analysis(products: Products, world: World, integrator, result: RenderResult) -> float:
+    """Add to ``products.report`` what the scene's optics say of the image: the brightness-theorem
+    comparison, the HUD figures (symbols and background from the sections of
+    :mod:`tracer.analysis.sections`) and the optical analysis from the scene's own eye; for a hybrid
+    render the HUD figures read the symbols off the HUD channel and the background behind them off the
+    environment channel. Skipped (the blocks stay null) for a stopped render (``result.partial``: a
+    stop must end promptly) and a scene without geometry. Returns the seconds it took."""
+    t0 = time.perf_counter()
+    if world.accel is None or result.partial:
+        return 0.0
+    scene, film, report = world.scene, result.film, products.report
+    sections = find_sections(world)
+    analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections)
+    analysis["seconds"] = time.perf_counter() - t0
+    counts = film.sample_counts()
+    unmeasured = 0 if counts is None else int((counts < MIN_REPLICATES).sum())
+    if unmeasured:  # a render stopped before two samples per pixel: no error bars to judge a difference by
+        analysis["not_comparable"].append(f"{unmeasured:,} pixels hold fewer than {MIN_REPLICATES} samples, so "
+                                          "the rendered means have no error bars to compare by")
+    channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
+    report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
+        if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
+    report["brightness_theorem"] = analysis
+    report["warnings"] += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
+    if not unmeasured:
+        report["warnings"] += missing_light_warnings(analysis, result.method)
+    if result.method in ("forward", "photon"):
+        report["warnings"] += aim_warnings(analysis)
+    # the optical analysis from the scene's own eye (the design eye point), whichever eye rendered
+    own_eye = world.eye.spec is scene.eye
+    report["optics"] = clean(optics_block(scene, world if own_eye else None))
+    report["warnings"] += [f"optics: {w}" for w in report["optics"].get("warnings", [])]
+    if "error" in report["optics"] and "target" in scene.raw:  # asked for, and not possible
+        report["warnings"].append(f"optics: {report['optics']['error']}")
+    seconds = time.perf_counter() - t0
+    report["analysis"], report["analysis_seconds"] = "done", seconds
+    return seconds
 
 
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
@@ -249,7 +310,10 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
                 notice(f"before the first ray: {w}")
             integrator.notice = notice
         integrator, result = run_render(integrator, budget, workers, progress, should_stop)
-        products = render_products(integrator.world, integrator, result, budget, analyse)
+        pending = analyse and integrator.world.accel is not None and not result.partial
+        products = render_products(integrator.world, integrator, result, budget, analyse=False)
+        if not pending:
+            products.report["analysis"] = "not run"
         if eye != "centre":
             products.report["image"]["eye"] = {"side": eye, "position_mm": integrator.world.eye.position.tolist(),
                                                "ipd_mm": float(scene.target.get("ipd_mm", 65.0))}
@@ -257,6 +321,15 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         outputs.keep()
     finally:
         outputs.close()
+    if pending and should_stop is not None and should_stop():  # stopped as the image was written
+        pending = False
+    if pending:  # after the image is written: its figures follow in report.json, rewritten whole
+        if progress is not None:
+            progress(1.0, f"image written to {out_dir}; the analysis follows (report.json: HUD figures, brightness "
+                   "theorem, optics)")
+        add_analysis(products, integrator.world, integrator, result)
+        report_file = products.files()[2]
+        write_as_set(Path(out_dir) / report_file.name, report_file.write, report_file.check)
     return products.report, result
 
 

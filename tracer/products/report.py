@@ -29,7 +29,9 @@ def components_report(result: RenderResult) -> dict:
     for name, kind in film.kinds.items():
         y = luminance(film.component_rgb(name))
         var = film.component_variance_y(name)
-        out[name] = {"normalised_by": kind, "count": film.norm[name], "mean_cd_m2": float(y.mean()),
+        count = film.norm[name]
+        count = float(count.mean()) if isinstance(count, np.ndarray) else count  # per pixel: the mean
+        out[name] = {"normalised_by": kind, "count": count, "mean_cd_m2": float(y.mean()),
                      "standard_error_cd_m2": float(math.sqrt(var.sum()) / y.size),
                      "share": float(y.sum()) / total if total > 0 else 0.0}
     return out
@@ -93,7 +95,8 @@ REPORT_SECTIONS = ("run_id", "tracer", "scene", "method", "seed", "budget", "par
                    "paths_found_light", "batches", "workers", "seconds", "rays_per_second", "efficiency",
                    "efficiency_definition", "luminance", "components", "replicates", "stage_seconds",
                    "adaptation_luminance", "adaptation_mode", "noise", "preview", "image", "warnings",
-                   "method_details", "brightness_theorem", "polarisation", "hud", "optics")
+                   "method_details", "brightness_theorem", "polarisation", "hud", "optics", "analysis",
+                   "analysis_seconds")
 
 
 def finite_json(value, where: str = "report") -> str:

@@ -74,7 +74,33 @@ class ThinLensEye:
         self.pixel_w = 2 * self.half_x / self.width
         self.pixel_h = 2 * self.half_y / self.height
         self.pixel_area = self.pixel_w * self.pixel_h
-        self.extent = self._pixel_extent()
+        #: G_pix per flat pixel, filled as pixels are first asked for (:meth:`extent_of`): NaN until then.
+        self._extent = np.full(self.width * self.height, np.nan)
+
+    @property
+    def extent(self) -> np.ndarray:
+        """G_pix (mm^2) of every pixel, flat (H*W,) (:meth:`extent_of` of them all)."""
+        return self.extent_of(np.arange(self.width * self.height))
+
+    def extent_of(self, pix: np.ndarray) -> np.ndarray:
+        """G_pix (mm^2) of the flat pixels ``pix`` (n,). Each pixel's is computed the first time it is asked
+        for and kept: a render that samples part of a large retina (a short budget at 4K) computes only
+        those, and the same numbers as computing all at once (each is its own elementwise sum)."""
+        pix = np.asarray(pix, dtype=np.int64)
+        got = self._extent[pix]
+        missing = np.isnan(got)
+        if missing.any():
+            new = np.unique(pix[missing])
+            self._extent[new] = self._pixel_extent(new)
+            got = self._extent[pix]
+        return got
+
+    @property
+    def smallest_extent(self) -> float:
+        """The smallest G_pix (mm^2): a corner pixel's (G_pix falls with the distance from the axis, and a
+        corner pixel's quadrature nodes lie farther out than those of any pixel of its quadrant)."""
+        w, h = self.width, self.height
+        return float(self.extent_of(np.array([0, w - 1, (h - 1) * w, h * w - 1])).min())
 
     # -- geometry ---------------------------------------------------------------------------
     def to_local(self, v: np.ndarray) -> np.ndarray:
@@ -98,17 +124,17 @@ class ThinLensEye:
         inside = (i >= 0) & (i < self.width) & (j >= 0) & (j < self.height)
         return np.where(inside, j * self.width + i, -1)
 
-    def _pixel_extent(self, order: int = 4) -> np.ndarray:
-        """G_pix (mm^2), flat (H*W,): the pixel integral (Gauss-Legendre, order^2) of the pupil
-        integral of cos^4(theta) / f^2, which is (s/f)^2 pi F(s |p| / f; s, a) at accommodation
+    def _pixel_extent(self, pix: np.ndarray, order: int = 4) -> np.ndarray:
+        """G_pix (mm^2) of the flat pixels ``pix``: the pixel integral (Gauss-Legendre, order^2) of the
+        pupil integral of cos^4(theta) / f^2, which is (s/f)^2 pi F(s |p| / f; s, a) at accommodation
         distance s (the rays from the pupil converge to the point s p / f of the accommodation plane)
         and A cos^4(theta_p) / f^2 at infinity."""
         nodes, weights = np.polynomial.legendre.leggauss(order)
         sx, sy = self.pixel_centers()
         ox = 0.5 * self.pixel_w * nodes
         oy = 0.5 * self.pixel_h * nodes
-        px = sx[None, :, None, None] + ox[None, None, :, None]
-        py = sy[:, None, None, None] + oy[None, None, None, :]
+        px = sx[pix % self.width][:, None, None] + ox[None, :, None]
+        py = sy[pix // self.width][:, None, None] + oy[None, None, :]
         tan2 = (px**2 + py**2) / self.focal**2
         s = self.accommodation
         if math.isinf(s):
@@ -116,11 +142,11 @@ class ThinLensEye:
         else:
             f = (s / self.focal) ** 2 * np.pi * disk_view_factor(s * np.sqrt(tan2), s, self.pupil_radius)
         w = (weights[:, None] * weights[None, :]) * 0.25 * self.pixel_area
-        total = np.zeros(f.shape[:2])
+        total = np.zeros(len(pix))
         for a in range(order):  # fixed summation order (see tracer.core.vec)
             for b in range(order):
-                total = total + f[:, :, a, b] * w[a, b]
-        return total.reshape(-1)
+                total = total + f[:, a, b] * w[a, b]
+        return total
 
     # -- backward: retina -> scene -------------------------------------------------------------
     def generate_rays(self, sx: np.ndarray, sy: np.ndarray, lens_xy: np.ndarray):
