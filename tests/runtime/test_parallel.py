@@ -39,18 +39,21 @@ def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_w
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["forward", "backward"])
-def test_two_processes_give_the_same_image_as_one(preset, method):
+@pytest.mark.parametrize("method, batch", [("forward", None), ("backward", None), ("backward", 16384)],
+                         ids=["forward", "backward", "backward, batches smaller than the image"])
+def test_two_processes_give_the_same_image_as_one(preset, method, batch):
     """Seed-addressed batches merged in order: the same film on one and on two processes (to the
-    last bits of rounding)."""
+    last bits of rounding), also where a backward batch covers a quarter of hud-direct's pixels (the
+    counts per pixel equal too)."""
     from tests.support.render import films_match
     from tracer.methods import INTEGRATORS, Budget
     from tracer.runtime.parallel import render_parallel
     from tracer.scene import load_scene
 
     folder = preset("hud-direct")
-    one = INTEGRATORS[method](load_scene(folder), 9).render(Budget(rays=2_500_000))
-    two = render_parallel(INTEGRATORS[method](load_scene(folder), 9), Budget(rays=2_500_000), workers=2)
+    one = INTEGRATORS[method](load_scene(folder), 9, batch).render(Budget(rays=2_500_000))
+    two = render_parallel(INTEGRATORS[method](load_scene(folder), 9, batch), Budget(rays=2_500_000), workers=2)
+    assert (one.film.sample_counts() is None) == (batch is None)
     assert one.batches == two.batches and one.rays == two.rays and one.found == two.found
     assert films_match(one, two)
 
