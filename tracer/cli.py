@@ -46,6 +46,8 @@ from pathlib import Path
 
 from .core.errors import STOP_SIGNALS, EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
 
+#: When the command began (near the interpreter's start): a render's --seconds count from here.
+STARTED = time.perf_counter()
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Limits of the render arguments (beyond them a render cannot be meant).
 MAX_SECONDS = 1e7
@@ -191,7 +193,8 @@ def cmd_render(args) -> int:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
     keep_freed_memory()
-    budget = Budget(rays=args.rays, seconds=args.seconds)
+    # --seconds count from the command's start (loading the scene included); each eye of a pair has its own
+    budget = Budget(rays=args.rays, seconds=args.seconds, since=STARTED if args.eye != "both" else None)
     flag = StopFlag()
     previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
     bar = None if args.quiet else ProgressBar()
@@ -632,7 +635,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"light-transport method (default {DEFAULT_METHOD})")
     b = r.add_mutually_exclusive_group(required=True)
     b.add_argument("--rays", type=ray_count, help="budget in traced ray segments (5000000 or 5e6)")
-    b.add_argument("--seconds", type=float, help="budget in wall-clock seconds")
+    b.add_argument("--seconds", type=float,
+                   help="budget in wall-clock seconds from the command's start until the image is written (the "
+                        "analysis follows it into report.json)")
     r.add_argument("--seed", type=int, default=0,
                    help="the seed of the random streams, 0 to 2^63 - 1 (default 0): with --rays the same seed gives "
                         "the same image on any number of workers")

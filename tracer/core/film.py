@@ -177,6 +177,7 @@ class Film:
         self.sums = {name: np.zeros((3, n)) for name in components}  # RGB, (3, pixels)
         self.norm: dict[str, int | np.ndarray] = dict.fromkeys(components, 0)  # the normaliser's total
         self.comp_rep_sq = {name: np.zeros(n) for name in components}  # per component, for its own error
+        self._lum: dict[str, np.ndarray] = {}  # per component, its luminance (pixels,) until the next merge
 
     @property
     def pixels(self) -> int:
@@ -243,13 +244,14 @@ class Film:
         its components are this film's ``prefix + name``, and with ``group`` its replicate sums go to that
         group of this film (the hybrid method merges each channel's batch so)."""
         names, sums, norms, c_sq, groups = data
+        self._lum.clear()
         for i, k in enumerate(names):
             k = prefix + k
             _add(self.sums[k], sums[i])
             n = norms[i]
             if isinstance(n, (np.ndarray, Columns)):
                 if not isinstance(self.norm[k], np.ndarray):
-                    self.norm[k] = np.full(self.pixels, self.norm[k], np.int64)
+                    self.norm[k] = np.full(self.pixels, self.norm[k], np.int32)
                 if isinstance(n, Columns):
                     self.norm[k][n.idx] += n.values
                 else:
@@ -264,6 +266,12 @@ class Film:
         self.merge_arrays(other.arrays())
 
     # -- results ---------------------------------------------------------------------------------
+    def finite(self) -> bool:
+        """Whether every sum is finite (then so are the image and its variance: the normalisers are
+        counts of at least one)."""
+        arrays = [*self.sums.values(), *self.comp_rep_sq.values(), *(g.sq for g in self.groups.values())]
+        return all(bool(np.isfinite(a).all()) for a in arrays)
+
     def _divided(self, name: str) -> np.ndarray:
         n = self.norm[name]
         return self.sums[name] / (np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1))
@@ -282,10 +290,13 @@ class Film:
         return out
 
     def _y(self, names) -> np.ndarray:
-        """Flat (pixels,) luminance of the sum of the components ``names``."""
+        """Flat (pixels,) luminance of the sum of the components ``names`` (each component's kept until
+        the next merge: the variances and the report ask for them again)."""
         y = np.zeros(self.pixels)
         for k in names:
-            y += luminance3(self._divided(k))
+            if k not in self._lum:
+                self._lum[k] = luminance3(self._divided(k))
+            y += self._lum[k]
         return y
 
     def _variance(self, y: np.ndarray, sq: np.ndarray, r) -> np.ndarray:
@@ -326,6 +337,10 @@ class Film:
                 mean = rep.mean_sum / r
                 var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
         return float(np.sqrt(var))
+
+    def component_y(self, name: str) -> np.ndarray:
+        """(H, W) one component's luminance estimate, cd/m^2."""
+        return self._y([name]).reshape(self.height, self.width)
 
     def component_variance_y(self, name: str) -> np.ndarray:
         rep = self.groups[self.group_of[name]]

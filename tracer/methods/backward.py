@@ -107,7 +107,7 @@ class BackwardTracer(Integrator, PathMethod):
         #: through which its light arrives ("light_aim"), the paper's directed split on the eye's side.
         self._eye_sampler = w.aimed_samplers(lambda o: o.material.light_aim)
         self.npix = self.eye.width * self.eye.height
-        self._pass_order: np.ndarray | None = None
+        self._pass_step: int | None = None
         self.strata = None
         ep = self.opts.get("exit_pupil")
         a = self.eye.pupil_radius
@@ -213,13 +213,13 @@ class BackwardTracer(Integrator, PathMethod):
         n = self.npix
         parts = -(-n // self.batch_size)
         size = -(-n // parts)
-        if self._pass_order is None:
+        if self._pass_step is None:
             step = int(round(n * 0.6180339887498949))
             while math.gcd(step, n) != 1:
                 step += 1
-            self._pass_order = (np.arange(n, dtype=np.int64) * step) % n
+            self._pass_step = step
         part = index % parts
-        return self._pass_order[part * size:(part + 1) * size]
+        return (np.arange(part * size, min((part + 1) * size, n), dtype=np.int64) * self._pass_step) % n
 
     def pilot_mean(self, ctx) -> float:
         """The image's mean luminance (cd/m^2) from one sample at each of ``batch_size`` random pixels."""

@@ -89,10 +89,14 @@ def facing_hint(world) -> str:
 
 @dataclass
 class Budget:
-    """Stop after ``rays`` ray segments or ``seconds`` of wall time, whichever comes first."""
+    """Stop after ``rays`` ray segments or ``seconds`` of wall time, whichever comes first. ``since``:
+    the ``time.perf_counter()`` from which the seconds count (the command line's start, so that the
+    interpreter's start and the scene's loading are part of the time the user gave); by default, when
+    the render begins."""
 
     rays: int | None = None
     seconds: float | None = None
+    since: float | None = None
 
     def __post_init__(self):
         if self.rays is None and self.seconds is None:
@@ -294,7 +298,7 @@ class Integrator:
                preview: Preview | None = None) -> RenderResult:
         """Render in this process: the batches run one at a time through the same driver, and the
         same merge, as on several processes (tracer.runtime.parallel) or a cluster (tracer.runtime.distributed)."""
-        started = time.perf_counter()
+        started = time.perf_counter() if budget.since is None else budget.since
         budget = self.prepare(budget)
         return drive(self, budget, LocalExecutor(self), 1, progress, should_stop, started=started, preview=preview)
 

@@ -26,7 +26,7 @@ from ..analysis.hud import hud_figures
 from ..analysis.optics import check_requirements, optics_block
 from ..analysis.sections import find_sections
 from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
-from ..core.imageio import read_exr_channels, read_image, write_exr, write_png
+from ..core.imageio import read_exr_channels, read_image, write_exr
 from ..core.units import luminance
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import MIN_REPLICATES
@@ -45,21 +45,33 @@ from .tonemap import adaptation_luminance, tonemap_ward
 OUTPUT_NAMES = ("image.exr", "preview.png", "report.json")
 
 
-def _finite_channels(channels: dict[str, np.ndarray]):
-    """Raise :class:`EstimateOverflowError` if a channel, as float32, holds NaN or Inf."""
-    for name, c in channels.items():
-        c32 = np.asarray(c, dtype=np.float32)
+def _finite_planes(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The channels as float32 planes; :class:`EstimateOverflowError` if one holds NaN or Inf so."""
+    planes = {k: np.asarray(v, dtype=np.float32) for k, v in channels.items()}
+    for name, c32 in planes.items():
         if not np.all(np.isfinite(c32)):
-            biggest = float(np.nanmax(np.abs(np.asarray(c, dtype=np.float64))))
+            biggest = float(np.nanmax(np.abs(np.asarray(channels[name], dtype=np.float64))))
             raise EstimateOverflowError(f"image.exr: channel {name} does not fit in float32 (largest |value| "
                                         f"{biggest:.3g}): the scene's luminances or fluxes are too large")
+    return planes
+
+
+def report_file(report: dict) -> OutputFile:
+    """report.json as a file of a set, checked by reading its run id back."""
+    text = finite_json(report)
+
+    def check(path):
+        if json.loads(Path(path).read_text())["run_id"] != report["run_id"]:
+            raise ValueError("the report read back differs from the one written")
+
+    return OutputFile("report.json", lambda p: Path(p).write_text(text), check)
 
 
 def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarray, report: dict) -> list[OutputFile]:
-    """The render's three files, each with its read-back check."""
-    _finite_channels(channels)
-    report_text = finite_json(report)
-    planes = {k: np.asarray(v, dtype=np.float32) for k, v in channels.items()}
+    """The render's three files, each with its read-back check (the EXR's and the preview's pixels
+    compared with those written)."""
+    planes = _finite_planes(channels)
+    report_out = report_file(report)  # its JSON checked before any file is written
 
     def check_exr(path):
         got, got_attrs = read_exr_channels(path)
@@ -68,17 +80,8 @@ def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarr
         if got_attrs.get("hud:run_id") != attrs["hud:run_id"]:
             raise ValueError("the header read back differs from the one written")
 
-    def check_png(path):
-        if read_image(path).shape[:2] != preview.shape[:2]:
-            raise ValueError("the preview read back has another size")
-
-    def check_report(path):
-        if json.loads(Path(path).read_text())["run_id"] != report["run_id"]:
-            raise ValueError("the report read back differs from the one written")
-
-    return [OutputFile("image.exr", lambda p: write_exr(p, channels, attrs), check_exr),
-            OutputFile("preview.png", lambda p: write_png(p, preview), check_png),
-            OutputFile("report.json", lambda p: Path(p).write_text(report_text), check_report)]
+    return [OutputFile("image.exr", lambda p: write_exr(p, planes, attrs), check_exr),
+            png_file("preview.png", preview), report_out]
 
 
 #: Share of the budget of the pilot render that finds the adaptation luminance a pupil follows.
@@ -114,7 +117,8 @@ def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
                                integrator.opts)
     rebuilt.notice = integrator.notice
     left = Budget(rays=None if budget.rays is None else max(1, budget.rays - first.rays),
-                  seconds=None if budget.seconds is None else max(1e-3, budget.seconds - (time.perf_counter() - t0)))
+                  seconds=budget.seconds if budget.since is not None or budget.seconds is None
+                  else max(1e-3, budget.seconds - (time.perf_counter() - t0)), since=budget.since)
     found = {"pilot_rays": first.rays, "pilot_seconds": first.seconds, "adaptation_mode": spec.adaptation,
              "pilot_adaptation_luminance_cd_m2": adapt, "pupil_diameter_mm": pupil,
              "first_guess_pupil_diameter_mm": spec.pupil_diameter_mm,
@@ -142,7 +146,7 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
     _check_started(result)
     if pupil is not None:
         result.extra["pupil"] = pupil
-    if not (np.all(np.isfinite(result.film.rgb())) and np.all(np.isfinite(result.film.variance_y()))):
+    if not result.film.finite():
         raise FloatingPointError("the estimator produced NaN or Inf: this is a bug, please report the scene")
     return integrator, result
 
@@ -183,12 +187,13 @@ def fill_unsampled(image: np.ndarray, missing: np.ndarray) -> int:
     count = int(missing.sum())
     if count == 0 or count == missing.size:
         return count
+    h, w = missing.shape
     known = ~missing
-    col = _nearest(known)  # (H, W)
-    row = _nearest(known.any(axis=1))  # (H,)
-    ys, xs = np.nonzero(missing)
-    src_y = row[ys]
-    image[ys, xs] = image[src_y, col[src_y, xs]]
+    col = _nearest(known)  # (H, W): in each row, the nearest sampled column (w where the row has none)
+    row = _nearest(known.any(axis=1))  # (H,): the nearest row that has a sampled pixel
+    source = row[:, None] * w + col[row]  # (H, W): every pixel's source, itself where sampled
+    flat = image.reshape(-1, image.shape[-1])
+    flat[:] = flat[source.ravel()]
     return count
 
 
@@ -328,8 +333,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
             progress(1.0, f"image written to {out_dir}; the analysis follows (report.json: HUD figures, brightness "
                    "theorem, optics)")
         add_analysis(products, integrator.world, integrator, result)
-        report_file = products.files()[2]
-        write_as_set(Path(out_dir) / report_file.name, report_file.write, report_file.check)
+        f = report_file(products.report)
+        write_as_set(Path(out_dir) / f.name, f.write, f.check)
     return products.report, result
 
 

@@ -25,9 +25,9 @@ def components_report(result: RenderResult) -> dict:
     """Each film component's share of the image, its mean luminance and that mean's standard error."""
     film = result.film
     out = {}
-    total = float(luminance(film.rgb()).sum())
+    total = float(sum(film.component_y(k).sum() for k in film.kinds))
     for name, kind in film.kinds.items():
-        y = luminance(film.component_rgb(name))
+        y = film.component_y(name)
         var = film.component_variance_y(name)
         count = film.norm[name]
         count = float(count.mean()) if isinstance(count, np.ndarray) else count  # per pixel: the mean

@@ -83,7 +83,8 @@ class DaskExecutor:
 def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
                 should_stop=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
-    started = time.perf_counter()  # a time budget counts the pilot and the upload of the scene
+    # a time budget counts the pilot and the upload of the scene
+    started = time.perf_counter() if budget.since is None else budget.since
     budget = local.prepare(budget)  # before the batch size and the options travel to the workers
     blob = pack_scene(local.scene.root)
     digest = hashlib.sha256(blob).hexdigest()

@@ -11,9 +11,10 @@ rays the image is therefore the same for any number of workers: the same batches
 and pixel values equal to the last bits of rounding. With a budget in seconds it is the prefix that
 was done in time.
 
-The clock of the budget starts when every worker has built its world (start-up is reported apart,
-as ``startup_seconds``); the parent blocks on a queue that the pool's completion callbacks fill,
-so it takes no CPU from the workers while it waits.
+A time budget counts the workers' start-up (``startup_seconds``, until every worker has built its
+world): until the first is ready the parent traces the batches itself (:class:`PoolExecutor`), then
+it blocks on a queue that the pool's completion callbacks fill, so it takes no CPU from the workers
+while it waits.
 
 Workers are plain Python processes, whether the parent is the command line or Blender. Inside
 Blender the tracer is a subpackage of the extension (``bl_ext.<repository>.hud_tracer.tracer``),
@@ -38,7 +39,7 @@ import time
 import types
 from pathlib import Path
 
-from ..core.errors import STOP_SIGNALS, StoppedBeforeFirstBatch
+from ..core.errors import STOP_SIGNALS
 from ..core.validate import check_workers
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import drive
@@ -48,39 +49,10 @@ from ..transport.world import World
 from .allocator import keep_freed_memory
 
 _WORKER: dict = {}
-#: Why a render stopped while its workers started.
-STOPPED_AT_START = "stopped while the worker processes started, before the first batch ended"
 #: What a worker puts on the start-up queue once its world is built (otherwise: what went wrong).
 READY = "ready"
 #: Seconds the parent waits for its workers to start.
 STARTUP_TIMEOUT = 600.0
-
-
-def _await_workers(pool, ready, workers: int, should_stop=None):
-    """Wait until every worker has built its world. Raises RuntimeError with the worker's message when
-    one could not, and when a worker process exits while starting (the pool would start another in
-    its place, forever: a worker that cannot even import the tracer); StoppedBeforeFirstBatch where
-    ``should_stop()`` turned true meanwhile (a stop signal to the process group reaches workers that
-    have not yet set their signals, and ends them)."""
-    pids = {p.pid for p in pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
-    deadline = time.perf_counter() + STARTUP_TIMEOUT
-    started = 0
-    while started < workers:
-        if should_stop is not None and should_stop():
-            raise StoppedBeforeFirstBatch(STOPPED_AT_START)
-        try:
-            msg = ready.get(timeout=0.1)
-        except queue.Empty:
-            if should_stop is not None and should_stop():
-                raise StoppedBeforeFirstBatch(STOPPED_AT_START) from None
-            if {p.pid for p in pool._pool} - pids or any(p.exitcode is not None for p in pool._pool):
-                raise RuntimeError("a worker process exited while starting (see its message above)") from None
-            if time.perf_counter() > deadline:
-                raise RuntimeError(f"the worker processes did not start within {STARTUP_TIMEOUT:.0f} s") from None
-            continue
-        if msg != READY:
-            raise RuntimeError(f"a worker process could not start: {msg}")
-        started += 1
 
 
 def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, scene_hash: str,
@@ -201,24 +173,74 @@ def _main_hidden():
             sys.modules["__main__"] = saved
 
 
-class PoolExecutor:
-    """The driver's executor over a multiprocessing pool: completions arrive on a queue."""
+class _Local:
+    """A batch that the parent traces itself (handed out before any worker was ready)."""
 
-    def __init__(self, pool, workers: int):
+    __slots__ = ("index", "result")
+
+    def __init__(self, index: int):
+        self.index, self.result = index, None
+
+
+class PoolExecutor:
+    """The driver's executor over a multiprocessing pool: completions arrive on a queue. Until the first
+    worker has built its world (``starting``: the pool, its start-up queue and the integrator of the
+    parent), the parent traces the batches it hands out itself, so that a short budget is not spent
+    waiting for the workers to import the tracer and load the scene; a batch is seed-addressed, so the
+    image is the same whoever traced it."""
+
+    def __init__(self, pool, workers: int, ready_queue, local):
         self.pool = pool
         self.workers = workers
         self.done: queue.Queue = queue.Queue()
+        self.ready_queue = ready_queue  # what workers put once their world is built; None once all are
+        self.local = local
+        self.ready = 0
+        self.pids = {p.pid for p in pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
+        self.deadline = time.perf_counter() + STARTUP_TIMEOUT
+        self.t0 = time.perf_counter()
+        self.startup_seconds: float | None = None
+
+    def _poll_ready(self):
+        """Count the workers that have built their worlds; raise RuntimeError when one could not, or a worker
+        process exited while starting (the pool would start another in its place, forever)."""
+        if self.ready_queue is None:
+            return
+        while self.ready < self.workers:
+            try:
+                msg = self.ready_queue.get_nowait()
+            except queue.Empty:
+                if {p.pid for p in self.pool._pool} - self.pids or any(p.exitcode is not None for p in self.pool._pool):
+                    raise RuntimeError("a worker process exited while starting (see its message above)") from None
+                if time.perf_counter() > self.deadline:
+                    raise RuntimeError(f"the worker processes did not start within {STARTUP_TIMEOUT:.0f} s") from None
+                return
+            if msg != READY:
+                raise RuntimeError(f"a worker process could not start: {msg}")
+            self.ready += 1
+        self.startup_seconds = time.perf_counter() - self.t0
+        self.ready_queue = None
 
     def submit(self, index: int):
+        self._poll_ready()
+        if self.ready == 0:
+            return _Local(index)
         return self.pool.apply_async(_run_batch, (index,), callback=lambda _r, k=index: self.done.put(k),
                                      error_callback=lambda _e, k=index: self.done.put(k))
 
     def wait(self, handles: dict, timeout: float | None) -> list[int]:
+        self._poll_ready()
+        local = [k for k, h in handles.items() if isinstance(h, _Local)]
+        out = []
+        if local:  # trace the first of the parent's own batches now (what the workers finished meanwhile too)
+            k = min(local)
+            handles[k].result = self.local.trace_batch(k)
+            out.append(k)
+            timeout = 0.0
         try:
-            first = self.done.get(timeout=timeout)
+            out.append(self.done.get_nowait() if timeout == 0.0 else self.done.get(timeout=timeout))
         except queue.Empty:
-            return []
-        out = [first]
+            return out
         while True:
             try:
                 out.append(self.done.get_nowait())
@@ -227,7 +249,7 @@ class PoolExecutor:
         return [k for k in out if k in handles]
 
     def result(self, handle):
-        return handle.get()
+        return handle.result if isinstance(handle, _Local) else handle.get()
 
 
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None,
@@ -238,7 +260,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     :class:`tracer.core.validate.WorkersError` when the machine's memory does not hold ``workers``
     processes."""
     check_workers(workers, local.scene.eye.resolution)  # WorkersError before the pilot and any process
-    started = time.perf_counter()  # a time budget counts the pilot and the workers' start-up
+    # a time budget counts the pilot and the workers' start-up
+    started = time.perf_counter() if budget.since is None else budget.since
     budget = local.prepare(budget)  # before the workers take the batch size and the options
     executable = python_executable()
     if executable is None:
@@ -250,7 +273,6 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
                                           local.worker_options(), dataclasses.asdict(local.eye.spec),
                                           local.scene.scene_hash, local.scene.allow_external, ready, ending))
-    t0 = time.perf_counter()
     # The workers start with the stop signals blocked (a blocked mask survives fork and exec), so that a
     # Ctrl-C to the process group while they import does not end them with a traceback; _init_worker
     # unblocks them once its handlers are set. Blocked here, a signal to this process waits (it is not
@@ -265,15 +287,19 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
             signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
     with pool:  # leaving it on an error terminates the workers
         try:
-            _await_workers(pool, ready, workers, should_stop)
-            startup = time.perf_counter() - t0
-            result = drive(local, budget, PoolExecutor(pool, workers), 2 * workers, progress, should_stop,
+            executor = PoolExecutor(pool, workers, ready, local)
+            result = drive(local, budget, executor, 2 * workers, progress, should_stop,
                            f"x{workers}", started=started, preview=preview)
-            # Batches still in flight are not needed, but the workers finish them (at most two each, of a
-            # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
-            # CPython's task handler (waiting for the inqueue's lock, never released).
-            pool.close()
-            pool.join()
+            startup = executor.startup_seconds
+            if executor.ready == 0:  # the parent traced every batch: the workers, still starting, are ended
+                ending.set()
+                pool.terminate()
+            else:
+                # Batches still in flight are not needed, but the workers finish them (at most two each, of a
+                # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
+                # CPython's task handler (waiting for the inqueue's lock, never released).
+                pool.close()
+                pool.join()
         except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
             ending.set()  # the workers' SIGTERM ends them again: the pool's terminate follows
             raise
