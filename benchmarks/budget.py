@@ -6,13 +6,14 @@
 
 For each size, the scene (a preset, written by ``hud-trace export``) gets that retina resolution (its
 field of view kept) and ``hud-trace render SCENE --seconds S --workers W`` runs as a command, in a
-session of its own. Every 20 ms the benchmark sums the proportional set size (PSS, /proc/PID/smaps_rollup:
-shared pages split between the processes that share them) of every process of that session (the command
-and its worker processes), and notes when image.exr appears in the output folder. It prints, per size:
-the wall time from the command's start until image.exr, preview.png and report.json are written (the
-image); until the command ends (with the analysis that follows the image into report.json); the peak
-of the summed PSS; and the render's own figures from report.json (rays, samples per pixel, setup).
-Linux only (/proc).
+session of its own. Every 20 ms the benchmark reads the proportional set size (PSS,
+/proc/PID/smaps_rollup: shared pages split between the processes that share them) of every process of
+that session (the command and its worker processes), and notes when report.json appears in the output
+folder (the image set is written). Per size it prints the wall time from the command's start until
+the image set is written and until the command ends (the analysis follows the image into
+report.json); the peak of the summed PSS over the whole command and until the image was written; the
+peaks of the command's own process and of the largest worker; and the render's figures from
+report.json (rays, samples per pixel, setup, the analysis's seconds). Linux only (/proc).
 """
 
 from __future__ import annotations
@@ -30,9 +31,9 @@ ROOT = Path(__file__).resolve().parents[1]
 HUD_TRACE = Path(sys.executable).with_name("hud-trace")
 
 
-def _session_pss_bytes(sid: int) -> int:
-    """Summed PSS (bytes) of the processes of session ``sid``."""
-    total = 0
+def _session_pss_bytes(sid: int) -> dict[int, int]:
+    """PSS (bytes) of each process of session ``sid``."""
+    out = {}
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit():
             continue
@@ -42,11 +43,11 @@ def _session_pss_bytes(sid: int) -> int:
                 continue
             for line in Path(entry.path, "smaps_rollup").read_text().splitlines():
                 if line.startswith("Pss:"):
-                    total += int(line.split()[1]) * 1024
+                    out[int(entry.name)] = int(line.split()[1]) * 1024
                     break
         except (OSError, ValueError, IndexError):
             continue
-    return total
+    return out
 
 
 def measure(scene: Path, out: Path, seconds: float, workers: int, method: str) -> dict:
@@ -54,12 +55,17 @@ def measure(scene: Path, out: Path, seconds: float, workers: int, method: str) -
            "--workers", str(workers), "--out", str(out), "--quiet"]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    peak = 0
+    peak = peak_image = 0
+    each: dict[int, int] = {}
     image_at = None
     while proc.poll() is None:
-        peak = max(peak, _session_pss_bytes(proc.pid))
+        now = _session_pss_bytes(proc.pid)
+        peak = max(peak, sum(now.values()))
+        for pid, v in now.items():
+            each[pid] = max(each.get(pid, 0), v)
         if image_at is None and (out / "report.json").exists():
             image_at = time.perf_counter() - t0
+            peak_image = peak
         time.sleep(0.02)
     ended = time.perf_counter() - t0
     err = proc.stderr.read()
@@ -67,8 +73,11 @@ def measure(scene: Path, out: Path, seconds: float, workers: int, method: str) -
         raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}:\n{err}")
     report = json.loads((out / "report.json").read_text())
     spp = report["image"].get("samples_per_pixel", {}).get("mean", report["method_details"].get("samples_per_pixel"))
+    workers = [v for k, v in each.items() if k != proc.pid]
     return {"image_written_s": image_at if image_at is not None else ended, "ended_s": ended,
-            "peak_pss_gb": peak / 1e9, "rays": report["rays"], "render_s": report["seconds"],
+            "peak_pss_gb": peak / 1e9, "peak_until_image_gb": (peak_image or peak) / 1e9,
+            "command_peak_gb": each.get(proc.pid, 0) / 1e9, "worker_peak_gb": max(workers, default=0) / 1e9,
+            "rays": report["rays"], "render_s": report["seconds"],
             "setup_s": report["method_details"].get("setup_seconds"),
             "analysis_s": report.get("analysis_seconds"), "samples_per_pixel": spp}
 
@@ -83,8 +92,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=1, help="runs per size (the table gives each)")
     args = ap.parse_args()
     print(f"{args.scene}, {args.method}, --seconds {args.seconds:g}, --workers {args.workers}; {os.cpu_count()} cores")
-    print(f"{'size':>10} {'image written':>14} {'command ends':>13} {'peak PSS':>9} {'rays':>11} {'spp':>6} "
-          f"{'setup':>6} {'analysis':>8}")
+    print(f"{'size':>10} {'image written':>14} {'command ends':>13} {'peak PSS':>9} {'to image':>8} {'command':>8} "
+          f"{'worker':>7} {'rays':>11} {'spp':>6} {'setup':>6} {'analysis':>8}")
     with tempfile.TemporaryDirectory() as tmp:
         for size in args.sizes:
             w, h = (int(v) for v in size.lower().split("x"))
@@ -95,9 +104,11 @@ def main():
             (folder / "scene.json").write_text(json.dumps(raw, indent=1))
             for k in range(args.repeat):
                 m = measure(folder, Path(tmp) / f"out-{size}-{k}", args.seconds, args.workers, args.method)
-                print(f"{size:>10} {m['image_written_s']:>12.2f} s {m['ended_s']:>11.2f} s {m['peak_pss_gb']:>6.2f} GB "
-                      f"{m['rays']:>11,} {m['samples_per_pixel']:>6.3f} {m['setup_s']:>5.2f}s "
-                      f"{m['analysis_s'] or 0:>7.2f}s", flush=True)
+                print(f"{size:>10} {m['image_written_s']:>12.2f} s {m['ended_s']:>11.2f} s "
+                      f"{m['peak_pss_gb']:>6.2f} GB {m['peak_until_image_gb']:>5.2f} GB "
+                      f"{m['command_peak_gb']:>5.2f} GB {m['worker_peak_gb']:>4.2f} GB {m['rays']:>11,} "
+                      f"{m['samples_per_pixel']:>6.3f} "
+                      f"{m['setup_s']:>5.2f}s {m['analysis_s'] or 0:>7.2f}s", flush=True)
 
 
 if __name__ == "__main__":

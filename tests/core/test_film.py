@@ -15,7 +15,7 @@ pytestmark = pytest.mark.slow
 def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path):
     """A forward batch lights a few thousand of hud-direct's 65,520 pixels: its film travels as those
     columns (tracer.core.film.Columns), and merging it gives every array of the dense merge, bit for bit
-    (sums, per-component and per-group replicate sums and squares). A backward batch's connections
+    (sums, per-component and per-group sums of the replicates' squares). A backward batch's connections
     light most pixels and travel whole; its paths that hit an LED, a few hundred, as columns."""
     import pickle
 
@@ -24,10 +24,10 @@ def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path)
     world = World(load_scene(PRESETS["hud-direct"].write(tmp_path / "s")))
 
     def dense(data):
-        names, sums, norms, c_sum, c_sq, groups = data
+        names, sums, norms, c_sq, groups = data
         full = lambda a: a if not isinstance(a, Columns) else _scatter(a)  # noqa: E731
-        return (names, [full(a) for a in sums], norms, [full(a) for a in c_sum], [full(a) for a in c_sq],
-                {g: (full(s), full(q), *rest) for g, (s, q, *rest) in groups.items()})
+        return (names, [full(a) for a in sums], norms, [full(a) for a in c_sq],
+                {g: (full(q), *rest) for g, (q, *rest) in groups.items()})
 
     def _scatter(c):
         out = np.zeros(c.values.shape[:-1] + (world.eye.width * world.eye.height,))
@@ -35,8 +35,8 @@ def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path)
         return out
 
     def arrays_of(film):
-        return ([film.sums[k] for k in film.kinds] + [film.comp_rep_sum[k] for k in film.kinds]
-                + [film.comp_rep_sq[k] for k in film.kinds] + [a for g in film.groups.values() for a in (g.sum, g.sq)])
+        return ([film.sums[k] for k in film.kinds] + [film.comp_rep_sq[k] for k in film.kinds]
+                + [g.sq for g in film.groups.values()])
 
     for method, sparse in (("forward", {"light": True}), ("backward", {"hit": True, "connection": False})):
         integ = INTEGRATORS[method](world, 3)

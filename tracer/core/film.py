@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .units import luminance3
+from .units import Y_WEIGHTS, luminance3
 
 #: A batch's per-pixel array travels as its non-zero columns (:class:`Columns`) when they are fewer
 #: than this share of the pixels.
@@ -283,11 +283,14 @@ class Film:
     def rgb(self, group: str | None = None) -> np.ndarray:
         """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
         ``group`` only, when given)."""
-        out = np.zeros((self.height, self.width, 3))
+        out = np.zeros((self.pixels, 3))
         for name in self.kinds:
             if group is None or self.group_of[name] == group:
-                out += self.component_rgb(name)
-        return out
+                n = self.norm[name]
+                n = np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
+                for c in range(3):  # a channel at a time: the same numbers as the whole (3, pixels) at once
+                    out[:, c] += self.sums[name][c] / n
+        return out.reshape(self.height, self.width, 3)
 
     def _y(self, names) -> np.ndarray:
         """Flat (pixels,) luminance of the sum of the components ``names`` (each component's kept until
@@ -295,7 +298,13 @@ class Film:
         y = np.zeros(self.pixels)
         for k in names:
             if k not in self._lum:
-                self._lum[k] = luminance3(self._divided(k))
+                n = self.norm[k]
+                n = np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
+                s = self.sums[k]  # luminance3 of the divided sums, a channel at a time (the same terms)
+                lum = (s[0] / n) * Y_WEIGHTS[0]
+                lum += (s[1] / n) * Y_WEIGHTS[1]
+                lum += (s[2] / n) * Y_WEIGHTS[2]
+                self._lum[k] = lum
             y += self._lum[k]
         return y
 
@@ -306,8 +315,13 @@ class Film:
         if r.ndim == 0 and r < 2:
             return np.zeros((self.height, self.width))
         rr = np.maximum(r, 2)
-        var = np.maximum(sq / rr - y * y, 0.0) / (rr - 1)
-        return np.where(r >= 2, var, 0.0).reshape(self.height, self.width)
+        var = sq / rr  # in place from here: a 4K image's temporaries are 66 MB each
+        var -= y * y
+        np.maximum(var, 0.0, out=var)
+        var /= rr - 1
+        if r.ndim:
+            var[r < 2] = 0.0
+        return var.reshape(self.height, self.width)
 
     def variance_y(self, group: str | None = None) -> np.ndarray:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2

@@ -71,8 +71,14 @@ def srgb_encode(v) -> np.ndarray:
     v = np.asarray(v)
     t = np.float32 if v.dtype == np.float32 else np.float64
     v = v.astype(t, copy=False)
-    curve = t(1.055) * np.maximum(v, t(0.0031308)) ** t(1.0 / 2.4) - t(0.055)
-    return np.where(v <= t(0.0031308), t(12.92) * v, curve)
+    # in place from here: a 4K preview's temporaries are 100 MB each
+    out = np.array(np.maximum(v, t(0.0031308)), dtype=t)
+    np.power(out, t(1.0 / 2.4), out=out)
+    out *= t(1.055)
+    out -= t(0.055)
+    low = v <= t(0.0031308)
+    out[low] = t(12.92) * v[low]
+    return out
 
 
 @contextlib.contextmanager

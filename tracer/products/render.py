@@ -174,10 +174,15 @@ def _nearest(known: np.ndarray) -> np.ndarray:
     """For each position along the last axis of ``known`` (..., n), the index of the nearest known one
     along that axis (the left one on a tie; n where the line has none)."""
     n = known.shape[-1]
-    at = np.arange(n)
-    left = np.maximum.accumulate(np.where(known, at, -1), axis=-1)
-    right = np.minimum.accumulate(np.where(known, at, n)[..., ::-1], axis=-1)[..., ::-1]
-    return np.where((left >= 0) & ((right >= n) | (at - left <= right - at)), left, right)
+    at = np.arange(n, dtype=np.int32)
+    left = np.where(known, at, np.int32(-1))
+    np.maximum.accumulate(left, axis=-1, out=left)
+    right = np.where(known, at, np.int32(n))[..., ::-1]
+    np.minimum.accumulate(right, axis=-1, out=right)
+    right = right[..., ::-1]
+    use_right = (left < 0) | ((right < n) & (at - left > right - at))
+    left[use_right] = right[use_right]
+    return left
 
 
 def fill_unsampled(image: np.ndarray, missing: np.ndarray) -> int:
@@ -191,9 +196,9 @@ def fill_unsampled(image: np.ndarray, missing: np.ndarray) -> int:
     known = ~missing
     col = _nearest(known)  # (H, W): in each row, the nearest sampled column (w where the row has none)
     row = _nearest(known.any(axis=1))  # (H,): the nearest row that has a sampled pixel
-    source = row[:, None] * w + col[row]  # (H, W): every pixel's source, itself where sampled
     flat = image.reshape(-1, image.shape[-1])
-    flat[:] = flat[source.ravel()]
+    for y in range(h):  # a row at a time: every pixel's source, itself where sampled
+        flat[y * w:(y + 1) * w] = flat[row[y] * w + col[row[y]]]
     return count
 
 
