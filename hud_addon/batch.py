@@ -67,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     group.add_argument("--seconds", type=float)
     group.add_argument("--rays", type=ray_count)
     ap.add_argument("--seed", type=int)
+    ap.add_argument("--scheduler", metavar="ADDRESS", help="render on this Dask scheduler's cluster (tcp://host:8786) "
+                    "instead of the .blend's Performance > Threads processes")
     args = ap.parse_args(argv)
     from tracer.cli import ArgumentError, check_render_args
     from tracer.products.outputs import OutputFolderError, OutputSet
@@ -78,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         check_render_args(argparse.Namespace(rays=args.rays, seconds=args.seconds, seed=args.seed or 0,
-                                             batch_size=None, workers=1))
+                                             batch_size=None, workers=1, scheduler=args.scheduler))
         outputs = OutputSet(Path(args.out).resolve(), OUTPUT_NAMES).open()
     except (ArgumentError, OutputFolderError) as e:
         print(f"error: {e}", file=sys.stderr)
@@ -125,6 +127,8 @@ def _render(args, blend: Path, outputs) -> int:
         scene.hud.budget, scene.hud.rays = "RAYS", args.rays
     if args.seed is not None:
         scene.hud.seed = args.seed
+    if args.scheduler is not None:
+        scene.hud.scheduler = args.scheduler
     settings = scene.render.image_settings
     settings.file_format = "OPEN_EXR_MULTILAYER"
     settings.color_depth = "32"
@@ -140,6 +144,7 @@ def _render(args, blend: Path, outputs) -> int:
             print(f"error: {blend.name}: {_blender_reason(e)} (Blender's check of the file's scene, camera and "
                   "output)", file=sys.stderr)
             return 2
+    engine.finish_analysis()  # the figures that follow the image
     figures = dict(engine.LAST_RENDER)
     for w in figures.get("warnings", []):
         print(f"warning: {w}", file=sys.stderr)

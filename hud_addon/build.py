@@ -89,6 +89,23 @@ def _is_factory_cube(obj) -> bool:
     return (np.allclose(np.abs(co), 1.0) and np.allclose(obj.matrix_world, np.eye(4)))
 
 
+#: Blender's startup camera and light: (name, type, location, rotation in radians), as the factory file has them.
+FACTORY = (("Camera", "CAMERA", (7.3589, -6.9258, 4.9583), (1.1093, 0.0, 0.8149)),
+           ("Light", "LIGHT", (4.0762, 1.0055, 5.9039), (0.6503, 0.0552, 1.8664)))
+
+
+def _is_factory_camera_or_light(obj) -> bool:
+    """The camera or the point light of Blender's startup file, where they were left: a preset brings its
+    own eye (the scene's camera), and the tracer's lights are emitting objects and Sun lights."""
+    for name, kind, location, rotation in FACTORY:
+        if obj.name == name and obj.type == kind:
+            if kind == "LIGHT" and obj.data.type != "POINT":
+                return False
+            return (np.allclose(obj.location[:], location, atol=1e-3)
+                    and np.allclose(obj.rotation_euler[:], rotation, atol=1e-3))
+    return False
+
+
 def _remove_collection(coll):
     """Remove a collection, its objects and the meshes and cameras only they used."""
     for obj in list(coll.all_objects):
@@ -103,16 +120,19 @@ def _remove_collection(coll):
 
 def clear_previous(scene) -> list[str]:
     """Remove the collections an earlier "Add HUD Preset" built in ``scene`` (and their objects) and
-    Blender's startup cube; returns the names of the collections removed."""
+    Blender's startup cube, camera and light (where they were left); returns the names of the
+    collections removed, and of the startup objects."""
     removed = []
     for coll in [c for c in scene.collection.children_recursive if TAG in c]:
         removed.append(coll.name)
         _remove_collection(coll)
-    for obj in [o for o in scene.objects if _is_factory_cube(o)]:
-        mesh = obj.data
+    for obj in [o for o in scene.objects if _is_factory_cube(o) or _is_factory_camera_or_light(o)]:
+        data, kind = obj.data, obj.type
+        if kind != "MESH":
+            removed.append(f"the startup {kind.lower()}")
         bpy.data.objects.remove(obj)
-        if mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
+        if data.users == 0:
+            {"MESH": bpy.data.meshes, "CAMERA": bpy.data.cameras, "LIGHT": bpy.data.lights}[kind].remove(data)
     return removed
 
 

@@ -19,7 +19,9 @@ it: ``<file>.falsecolour.png`` and ``<file>.report.json`` (:func:`write_beside`)
 from __future__ import annotations
 
 import json
+import sys
 import tempfile
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -34,8 +36,9 @@ from ..tracer.core.validate import WorkersError, check_workers
 from ..tracer.methods import INTEGRATORS, Budget
 from ..tracer.products.falsecolour import false_colour
 from ..tracer.products.outputs import png_file, write_as_set
-from ..tracer.products.render import render_products, run_render
+from ..tracer.products.render import add_analysis, render_products, run_render
 from ..tracer.products.report import finite_json
+from ..tracer.runtime.distributed import SchedulerError, connect
 from ..tracer.scene import load_scene
 from ..tracer.transport.world import World
 from .export import export_scene
@@ -65,6 +68,43 @@ LAST_RENDER: dict = {}
 REPORTS: dict[str, dict] = {}
 #: The false-colour view of each scene's last render: (sRGB uint8 (H', W', 3), its info).
 FALSE_COLOUR: dict[str, tuple] = {}
+#: The analysis that follows each scene's last render into its report (a thread: see :func:`render_final`).
+ANALYSES: dict[str, threading.Thread] = {}
+
+
+def finish_analysis(scene_name: str | None = None):
+    """Wait for the analysis of ``scene_name``'s last render (of every scene's: None) to be in its report."""
+    for name, thread in list(ANALYSES.items()):
+        if scene_name is None or name == scene_name:
+            thread.join()
+            ANALYSES.pop(name, None)
+
+
+def _analyse_later(scene_name: str, products, world, integrator, result):
+    """The analysis (tracer.products.render.add_analysis: HUD figures, brightness theorem, optics) of a
+    render whose image is already in the Render Result, in a thread of its own: the report in REPORTS
+    (and LAST_RENDER, while it is still this render's) reads "analysis": "pending" until it is done. The
+    analysis touches no Blender data."""
+    run_id = products.report["run_id"]
+
+    def run():
+        try:
+            add_analysis(products, world, integrator, result)
+        except Exception as e:  # noqa: BLE001 - a fault of the tracer: said in the report, not lost in a thread
+            traceback.print_exc()
+            products.report["analysis"] = f"failed: {type(e).__name__}: {e}"
+        report = products.report
+        for w in report["warnings"]:
+            if w not in REPORTS.get(scene_name, {}).get("warnings", []):
+                print(f"HUD Tracer: {w}", file=sys.stderr)
+        if REPORTS.get(scene_name, {}).get("run_id") == run_id:
+            REPORTS[scene_name] = REPORTS[scene_name] | report
+        if LAST_RENDER.get("run_id") == run_id:
+            LAST_RENDER.update(report)
+
+    thread = threading.Thread(target=run, name=f"hud-analysis-{scene_name}", daemon=True)
+    ANALYSES[scene_name] = thread
+    thread.start()
 
 
 def worker_count(scene) -> int:
@@ -140,10 +180,16 @@ def render_final(engine, depsgraph) -> dict:
         for w in generated_image_warnings(scene):
             engine.report({"WARNING"}, f"HUD Tracer: {w}")
         width, height = tracer_scene.eye.resolution
+        scheduler = s.scheduler.strip() or None
         try:
-            check_workers(worker_count(scene), (width, height))
+            if scheduler is None:
+                check_workers(worker_count(scene), (width, height))
+            else:  # reached before the first ray
+                connect(scheduler)
         except WorkersError as e:
             return _fail(engine, scene, f"Render Properties > Performance > Threads: {e}")
+        except SchedulerError as e:
+            return _fail(engine, scene, f"Render Properties > HUD Tracer > Dask Scheduler: {e}")
         world = World(tracer_scene)
         integrator = INTEGRATORS[s.method](world, s.seed)
         for w in aim_preflight(world, s.method, integrator.renders_environment):
@@ -167,8 +213,8 @@ def render_final(engine, depsgraph) -> dict:
         t0 = time.perf_counter()
         try:
             integrator, result = run_render(integrator, budget, worker_count(scene), progress, engine.test_break,
-                                            preview)
-            products = render_products(integrator.world, integrator, result, budget)
+                                            preview, scheduler)
+            products = render_products(integrator.world, integrator, result, budget, analyse=False)
         except StoppedBeforeFirstBatch as e:
             engine.end_result(rr)
             return _fail(engine, scene, f"{e}: nothing rendered", "stopped")
@@ -185,13 +231,16 @@ def render_final(engine, depsgraph) -> dict:
         attrs = products.attrs | {"hud:units": UNITS}
         for key, value in attrs.items():
             full.stamp_data_add_field(key, str(value))
-    report = products.report | {"blender": {"frame": scene.frame_current, "wall_seconds": time.perf_counter() - t0}}
+    products.report["blender"] = {"frame": scene.frame_current, "wall_seconds": time.perf_counter() - t0}
+    report = dict(products.report)
     for w in report["warnings"]:
         engine.report({"WARNING"}, f"HUD Tracer: {w}")
     LAST_RENDER.clear()
     LAST_RENDER.update(report)
     REPORTS[scene.name] = report
     FALSE_COLOUR[scene.name] = false_colour(products.y)
+    if report["analysis"] == "pending":  # the image is shown; its figures follow into the report
+        _analyse_later(scene.name, products, integrator.world, integrator, result)
     return dict(report)
 
 
@@ -214,6 +263,7 @@ def written_file(scene) -> Path | None:
 def write_beside(scene, *_):
     """render_write handler: beside the file Blender has just written for ``scene``'s frame, the
     false-colour view and the report of that render (each written as a set: tracer.products.outputs)."""
+    finish_analysis(scene.name)
     report = REPORTS.get(scene.name)
     if report is None or report.get("blender", {}).get("frame") != scene.frame_current:
         return
@@ -255,6 +305,10 @@ def register():
 
 
 def unregister():
+    from ..tracer.runtime.parallel import close_shared_pool
+
+    finish_analysis()  # no thread of ours outlives the add-on
+    close_shared_pool()  # the session's worker processes, kept from F12 to F12, end with the add-on
     if write_beside in bpy.app.handlers.render_write:
         bpy.app.handlers.render_write.remove(write_beside)
     _unregister_classes()

@@ -190,7 +190,9 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
             folder = Path(tmp) / "scene"
             try:  # as Export and F12 report it: the object or setting at fault, not the staged scene.json
                 tracer_scene = load_scene(export_scene(context.evaluated_depsgraph_get(), folder))
-                paths = INTEGRATORS["forward"](tracer_scene, scene.hud.seed).light_paths(self.particles)
+                forward = INTEGRATORS["forward"](tracer_scene, scene.hud.seed)
+                paths = forward.light_paths(self.particles)
+                hint = "" if paths else forward.no_paths_hint()
             except SceneError as e:
                 self.report({"ERROR"}, f"Show Light Paths: {blender_terms(e, folder, scene)}")
                 return {"CANCELLED"}
@@ -198,7 +200,8 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
                 self.report({"ERROR"}, f"Show Light Paths: {e}")
                 return {"CANCELLED"}
         if not paths:
-            self.report({"WARNING"}, f"none of {self.particles:,} particles reached the eye pupil")
+            self.report({"WARNING"}, f"Show Light Paths: none of {self.particles:,} particles reached the eye pupil"
+                                     + (f": {hint}" if hint else ""))
             return {"CANCELLED"}
         paths = paths[: self.max_paths]
         verts = np.concatenate(paths) / unit_mm(scene)

@@ -84,6 +84,9 @@ def _scene_annotations() -> dict:
         "seconds": FloatProperty(name="Seconds", default=10.0, min=0.01, description="Render time, s"),
         "rays": IntProperty(name="Rays", default=10_000_000, min=1, description="Ray segments to trace"),
         "seed": IntProperty(name="Seed", default=0, min=0, description="Seed of the random streams"),
+        "scheduler": StringProperty(name="Dask Scheduler", default="",
+                                    description="Address of a Dask scheduler (tcp://host:8786) to render on its "
+                                                "cluster; empty: this machine's processes (Performance > Threads)"),
         "polarisation": EnumProperty(name="Polarisation", items=_polarisation_items(), default="auto",
                                      description="Whether light carries its polarisation (scene.json "
                                                  "\"polarisation\"): Auto where the scene polarises, Off for "

@@ -38,6 +38,7 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         col.prop(s, "seconds" if s.budget == "SECONDS" else "rays")
         col.prop(s, "seed")
         col.prop(s, "polarisation")
+        col.prop(s, "scheduler")
         if s.method in METHOD_OPTIONS:
             box = col.box()
             box.label(text=f"{s.method.capitalize()} options")
@@ -87,6 +88,8 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
             for label, text in readouts(report):
                 grid.label(text=label)
                 grid.label(text=text)
+            if report.get("analysis") == "pending":
+                col.label(text="The HUD figures follow the image (analysis running)", icon="TIME")
             for w in report["warnings"]:
                 col.label(text=w[:120], icon="ERROR")
             col.operator("hud.show_false_colour", icon="IMAGE")
@@ -284,7 +287,10 @@ BUILTIN_PANELS = (
     "RENDER_PT_color_management_curves", "RENDER_PT_color_management_display_settings",
     "RENDER_PT_color_management_white_balance", "DATA_PT_context_camera", "DATA_PT_camera", "DATA_PT_lens",
     "DATA_PT_camera_display", "DATA_PT_camera_safe_areas", "DATA_PT_context_mesh", "DATA_PT_uv_texture",
-    "DATA_PT_vertex_groups", "RENDER_PT_stamp", "RENDER_PT_stamp_note", "RENDER_PT_stamp_burn")
+    "DATA_PT_vertex_groups", "RENDER_PT_stamp", "RENDER_PT_stamp_note", "RENDER_PT_stamp_burn",
+    # Object > Visibility (Disable in Renders), the light's type (the HUD Sun panel asks for a Sun), the
+    # World selector (a scene without a World gets one there): hidden for an engine that does not join them
+    "OBJECT_PT_visibility", "DATA_PT_context_light", "WORLD_PT_context_world")
 
 
 def builtin_panels() -> list:

@@ -56,3 +56,13 @@ def hud_with_sky(tmp_path_factory):
     folder = PRESETS["hud-direct"].write(tmp_path_factory.mktemp("hud") / "s", resolution=(96, 48))
     edit_json(folder, lambda d: d.update(environment={"type": "uniform", "luminance": 2000.0}))
     return folder
+
+
+@pytest.fixture(scope="session", autouse=True)
+def worker_pool_closed_at_the_end():
+    """The session's worker pool (tracer.runtime.parallel.shared_pool), kept from test to test, is closed
+    when the tests end, as the command line closes it when its command ends."""
+    yield
+    from tracer.runtime.parallel import close_shared_pool
+
+    close_shared_pool()

@@ -14,7 +14,7 @@ Blender's tool packs every file of its source folder that the manifest's ``paths
 not exclude, so a user's own files in the checkout (a scene.blend, a scenes/ folder of exports) would
 ship too. The build therefore runs on a staging copy of only what the add-on is made of
 (:data:`SHIPPED`: the manifest, __init__.py, LICENSE, tracer/, hud_addon/, presets/ and the wheels the
-manifest lists), from which the manifest's patterns still drop caches and the Dask driver.
+manifest lists), from which the manifest's patterns still drop caches.
 
 ``--split-platforms`` makes one zip per platform of the manifest, named
 ``<id>-<version>-<platform, "-" as "_">.zip`` (hud_tracer-0.1.0-linux_x64.zip, ...), each carrying the

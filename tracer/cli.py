@@ -53,6 +53,9 @@ EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4,
 MAX_SECONDS = 1e7
 MAX_RAYS = 10**15
 MAX_WORKERS = 1024
+SCHEDULER_HELP = ("render on the Dask cluster of this scheduler (tcp://host:8786; `dask scheduler`, `dask worker "
+                  "ADDRESS` on each machine) instead of --workers local processes: the same outputs, and with --rays "
+                  "the same image (docs/user/cluster.md)")
 
 
 class ProgressBar:
@@ -124,6 +127,13 @@ def check_render_args(args):
 
     if args.rays is not None and not 1 <= args.rays <= MAX_RAYS:
         bad("--rays", f"must lie in [1, {MAX_RAYS:.0e}], got {args.rays}")
+    if getattr(args, "scheduler", None) is not None:  # reached before anything is loaded or traced
+        from .runtime.distributed import SchedulerError, connect
+
+        try:
+            connect(args.scheduler)
+        except SchedulerError as e:
+            bad("--scheduler", str(e))
     if args.seconds is not None and not (math.isfinite(args.seconds) and 0 < args.seconds <= MAX_SECONDS):
         bad("--seconds", f"must be a finite number in (0, {MAX_SECONDS:.0e}], got {args.seconds}")
     if not 0 <= args.seed < 2**63:
@@ -210,6 +220,7 @@ def cmd_render(args) -> int:
                 out = args.out if len(sides) == 1 else str(Path(args.out) / side)
                 report, result = render_scene(scene, args.method, budget, args.seed, out, progress=bar,
                                               should_stop=flag, batch_size=args.batch_size, workers=args.workers,
+                                              scheduler=args.scheduler,
                                               analyse=not args.no_analysis, eye=side,
                                               notice=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
                 done.append((side, out, report))
@@ -560,7 +571,7 @@ def cmd_sweep(args) -> int:
                 previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
                 try:
                     result = run_sweep(plan, "optics" if args.optics else args.method, budget, args.seed, outputs,
-                                       workers=args.workers,
+                                       workers=args.workers, scheduler=args.scheduler,
                                        batch_size=args.batch_size, progress=bar, should_stop=flag, on_run=on_run)
                 finally:
                     for s, handler in previous.items():
@@ -651,6 +662,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "batch takes about 2 %% of the budget)")
     r.add_argument("--workers", type=int, default=available_cpus(),
                    help="processes (default: one per core); with --rays the image does not depend on it")
+    r.add_argument("--scheduler", metavar="ADDRESS", default=None, help=SCHEDULER_HELP)
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--no-analysis", action="store_true",
                    help="leave the brightness-theorem comparison and the optical analysis out of report.json (they "
@@ -738,6 +750,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--workers", type=int, default=available_cpus(),
                    help="processes per run (default: one per core)")
     w.add_argument("--batch-size", type=int, default=None, help="paths per batch, as for render")
+    w.add_argument("--scheduler", metavar="ADDRESS", default=None, help=SCHEDULER_HELP)
     w.add_argument("--out", required=True, help="output folder (runs/<k>/, sweep.csv, sweep.json, sweep.png)")
     w.add_argument("--require", action="append", default=[], metavar="\"KEY OP VALUE\"",
                    help="a requirement on each run's report: KEY a dotted path into it (hud.contrast_ratio, "
@@ -783,6 +796,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # before a command installs its own handler (while its modules import)
         print("interrupted before the work began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:  # the worker pool the command's renders shared ends with the command, not at the interpreter's exit
+        parallel = sys.modules.get(f"{__package__}.runtime.parallel")
+        if parallel is not None:
+            parallel.close_shared_pool()
+        distributed = sys.modules.get(f"{__package__}.runtime.distributed")
+        if distributed is not None:
+            distributed.close_clients()
 
 
 if __name__ == "__main__":

@@ -47,12 +47,13 @@ def scenario_preset_twice():
 
 
 def test_add_hud_preset_builds_in_millimetres_and_replaces_the_previous_one():
-    """On Blender's startup scene the preset replaces the startup cube and is built
+    """On Blender's startup scene the preset replaces the startup cube, camera and point light and is built
     in a collection in millimetres (1 unit = 1 mm: hud-direct's LED dies are 0.2 units wide); pressed
     again it replaces itself (no "Eye.001"); with Replace off it adds beside. Lengths show in the
     scene's unit system and are stored in mm."""
     res, _ = in_blender(scenario_preset_twice)
-    assert "Cube" in res["startup"] and "Cube" not in res["first"]
+    assert {"Cube", "Camera", "Light"} <= set(res["startup"])
+    assert not {"Cube", "Camera", "Light"} & set(res["first"])  # the preset's Eye is the camera (issue 31)
     assert res["second"] == res["first"] and not any(n.endswith(".001") for n in res["second"])
     assert res["units"]["length_unit"] == "MILLIMETERS" and res["units"]["scale_length"] == pytest.approx(0.001)
     assert res["led_area"] == pytest.approx(0.2 * 0.2, rel=1e-3)  # a 0.2 x 0.2 mm die, in mm^2

@@ -185,3 +185,22 @@ def test_a_stop_signal_ends_an_eyebox_scan_with_nothing_written(tmp_path):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and "nothing written" in err and "Traceback" not in err, err
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_a_stopped_render_keeps_its_hud_figures_marked_partial(preset, tmp_path):
+    """Issue 31: a render stopped with Ctrl-C wrote a set whose hud and brightness_theorem were null, so
+    the figures of what it had accumulated were lost and readouts showed only the mean. A stop after
+    the first batch now keeps the HUD figures of the batches merged, marked partial (hud-direct, one
+    process, stopped by should_stop after its first merge); readouts print them."""
+    from tracer.methods import Budget
+    from tracer.products.render import render_folder
+
+    answers = iter([False] * 3 + [True] * 10**6)
+    report, result = render_folder(preset("hud-direct"), "backward", Budget(rays=10**12), 1, tmp_path / "o",
+                                   should_stop=lambda: next(answers))
+    assert result.partial and report["partial"] and report["brightness_theorem"] is None
+    hud = report["hud"]
+    assert hud["partial"] is True and hud["symbol_cd_m2"] > 10 * hud["background_cd_m2"] > 0
+    assert report["analysis"] == "hud figures only (stopped render)"
+    code, err = run_cli("readouts", tmp_path / "o")
+    assert code == 0

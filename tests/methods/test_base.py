@@ -174,3 +174,15 @@ def test_an_emitter_facing_away_is_named_where_no_light_is_found(tmp_path, metho
         warnings[facing[1]] = " ".join(result.warnings)
     assert "'panel' emits from the front side only" in warnings[1] and "two_sided" in warnings[1]
     assert "front side" not in warnings[-1]
+
+
+def test_the_steady_pace_is_the_rays_over_the_time_after_the_setup(mirror):
+    """report.json's steady_rays_per_second read 1.2e9 on a run of 3.3 M rays/s (issue 31): it divided the
+    rays after the first merged batch by the time after it, which is short where batches finish together.
+    It is now the rays over the time from the first batch handed out: never above the rays over the whole
+    render's time less its setup. Two workers here, whose batches finish together."""
+    from tracer.runtime.parallel import render_parallel
+
+    res = render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=20_000_000), workers=2)
+    steady = res.extra["steady_rays_per_second"]
+    assert res.rays / res.seconds <= steady <= res.rays / (res.seconds - res.extra["setup_seconds"]) * 1.001

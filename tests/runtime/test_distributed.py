@@ -19,3 +19,39 @@ def test_dask_cluster_gives_the_same_image(preset):
     with cluster, distributed.Client(cluster) as client:
         dask = render_dask(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=2_000_000), client)
     assert dask.batches == one.batches and films_match(one, dask)
+
+
+def test_the_command_line_renders_on_a_scheduler_the_same_image_and_set(preset, tmp_path):
+    """Issue 31: `hud-trace render --scheduler ADDRESS` (a LocalCluster of two worker processes here) writes
+    the same output set as a local render, and for a budget in rays the same image (to the last bits of
+    rounding); its report names the scheduler and the cluster's workers. An address where no scheduler
+    answers is refused before anything is loaded, in one line naming --scheduler (exit 2, nothing
+    written)."""
+    distributed = pytest.importorskip("distributed")
+    import json
+
+    import numpy as np
+
+    from tests.support.cli import assert_one_line_error, run_cli
+    from tracer.core.imageio import read_exr_channels
+
+    folder = preset("hud-direct")
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    code, err = run_cli("render", folder, "--rays", 2_000_000, "--seed", 3, "--workers", 1, "--quiet",
+                        "--out", local)
+    assert code == 0, err
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    with cluster:
+        code, err = run_cli("render", folder, "--rays", 2_000_000, "--seed", 3, "--quiet", "--out", remote,
+                            "--scheduler", cluster.scheduler_address)
+    assert code == 0, err
+    assert sorted(p.name for p in local.iterdir()) == sorted(p.name for p in remote.iterdir())
+    a, b = read_exr_channels(local / "image.exr")[0], read_exr_channels(remote / "image.exr")[0]
+    assert set(a) == set(b) and all(np.allclose(a[k], b[k], rtol=1e-6, atol=0) for k in ("R", "G", "B", "Y"))
+    report = json.loads((remote / "report.json").read_text())
+    assert report["workers"] == 2 and report["method_details"]["scheduler"] == cluster.scheduler_address
+    assert report["rays"] == json.loads((local / "report.json").read_text())["rays"]
+    code, err = run_cli("render", folder, "--rays", 1000, "--out", tmp_path / "none", "--scheduler",
+                        "tcp://127.0.0.1:9")
+    assert_one_line_error(code, err, "--scheduler", "tcp://127.0.0.1:9", "no Dask scheduler answers")
+    assert not (tmp_path / "none").exists()

@@ -142,3 +142,31 @@ def test_external_files_are_allowed_in_the_workers_too(preset, tmp_path):
     edit_json(folder, lambda d: [o.update(mesh=str(outside / Path(o["mesh"]).name)) for o in d["objects"]])
     assert main(["render", str(folder), "--rays", "200000", "--workers", "2", "--out", str(tmp_path / "o"),
                  "--quiet", "--allow-external-files"]) == 0
+
+
+def test_one_pool_serves_the_renders_of_a_session(preset):
+    """Issue 31: every F12 started its worker processes again (2.8 to 4.8 s in Blender). The session's
+    pool is kept: a second render, of another scene and method, reuses its processes (the same pids,
+    ``pool: reused``, no start-up), gives the same image as one process, and a pool of another size
+    replaces it; close_shared_pool ends the processes."""
+    from tests.support.render import films_match
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime import parallel
+    from tracer.scene import load_scene
+
+    parallel.close_shared_pool()
+    first = parallel.render_parallel(INTEGRATORS["backward"](load_scene(preset("analytic-mirror")), 3),
+                                     Budget(rays=20_000_000), workers=2)
+    pool = parallel.shared_pool(2)
+    pids = {p.pid for p in pool.pool._pool}
+    assert first.extra["pool"] == "started" and pool.used
+    folder = preset("analytic-disk")
+    second = parallel.render_parallel(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=3_000_000),
+                                      workers=2)
+    assert second.extra["pool"] == "reused" and second.extra["startup_seconds"] == 0.0
+    assert parallel.shared_pool(2) is pool and {p.pid for p in pool.pool._pool} == pids
+    alone = INTEGRATORS["forward"](load_scene(folder), 4).render(Budget(rays=3_000_000))
+    assert films_match(alone, second)
+    processes = list(pool.pool._pool)
+    parallel.close_shared_pool()
+    assert all(p.exitcode is not None for p in processes)

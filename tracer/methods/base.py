@@ -427,7 +427,7 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     extra: dict = {}
     batch_seconds: list[float] = []
     batch_rays: list[int] = []
-    first = (0.0, 0)  # (seconds, rays) when the first batch was merged
+    issued = None  # seconds from the start when the first batch was handed out
     shown = -math.inf  # when the last preview was shown
     partial = False
     start = time.perf_counter() if started is None else started
@@ -461,6 +461,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
         if should_stop is not None and should_stop():
             partial = True
             break
+        if issued is None:
+            issued = time.perf_counter() - start
         while len(pending) < in_flight and worth_issuing():
             pending[next_index] = executor.submit(next_index)
             next_index += 1
@@ -482,8 +484,6 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
             stages.add(b.stages)
             local.merge_extra(extra, b.extra)
             merged += 1
-            if merged == 1:
-                first = (time.perf_counter() - start, rays)
             if progress is not None:
                 el = time.perf_counter() - start
                 eff = found / paths if paths else 0.0
@@ -498,8 +498,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
                           list(local.warnings), dict(extra))
     result.stages = {k: float(v) for k, v in stages.seconds.items()}
     result.extra["setup_seconds"] = setup
-    if merged > 1 and seconds > first[0]:
-        result.extra["steady_rays_per_second"] = (rays - first[1]) / (seconds - first[0])
+    if merged and issued is not None and seconds > issued:  # the tracing's pace, its setup left out
+        result.extra["steady_rays_per_second"] = rays / (seconds - issued)
     local.truncated = truncated
     local.finish(result)
     return result

@@ -21,7 +21,7 @@ from ..core.vec import F32, take
 from ..optics.aimed import Aimed, CosineEmission
 from ..optics.bsdf import IMPORTANCE, Interaction
 from ..transport.path import PathMethod, PathState, continue_by_sampling, trace
-from .base import WAVE, Integrator, register
+from .base import WAVE, Integrator, facing_hint, register
 
 #: Replicates per batch: particles are dealt round-robin into this many groups (tracer.core.film).
 REPLICATES = 8
@@ -183,6 +183,27 @@ class ForwardTracer(Integrator, PathMethod):
         starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
         ends = np.r_[starts[1:], len(ids)]
         return [pts[a:b] for a, b in zip(starts, ends, strict=True) if not only_to_eye or eye_hit[b - 1]]
+
+    def no_paths_hint(self) -> str:
+        """What to do where none of the sampled light paths reached the eye pupil: an emitter that faces away
+        (:func:`tracer.methods.base.facing_hint`), and what to aim its emission at: a Lambertian emitter
+        sends about (pupil area) / (pi d^2) of its particles into a pupil at distance d (1e-6 for a 4 mm pupil
+        1 m away), and where its light reaches the eye through mirrors or lenses, aiming at the eye misses:
+        the first optic on the way is the target (the optic's aperture, or the pupil's image through it)."""
+        emitters = [o for o in self.scene.objects if o.emission is not None]
+        unaimed = [o.name for o in emitters if o.emission.aim is None]
+        to_eye = [o.name for o in emitters if o.emission.aim is not None and o.emission.aim.target == "eye"]
+        parts = [facing_hint(self.world).removeprefix("; ")]
+        if unaimed:
+            parts.append(f"{', '.join(repr(n) for n in unaimed[:5])} emit{'s' if len(unaimed) == 1 else ''} without "
+                         "an aim, so about (pupil area) / (pi d^2) of the particles reach a pupil at distance d (one "
+                         "in a million for 4 mm at 1 m): give the emission an aim (scene.json emission.aim; in "
+                         "Blender the emitter's Emission > Aim)")
+        if to_eye or unaimed:
+            parts.append("where the light reaches the eye through mirrors or lenses, aim at the first optic on its way "
+                         "(its aperture, or the eye pupil's image through it), not at the eye; or render with the "
+                         "backward method, which needs no aim")
+        return "; ".join(p for p in parts if p)
 
     def finish(self, result):
         super().finish(result)

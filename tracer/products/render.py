@@ -127,10 +127,11 @@ def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
 
 
 def run_render(integrator, budget: Budget, workers: int = 1, progress=None, should_stop=None,
-               preview=None) -> tuple[object, RenderResult]:
+               preview=None, scheduler: str | None = None) -> tuple[object, RenderResult]:
     """Run ``integrator`` for ``budget`` on ``workers`` processes (tracer.runtime.parallel) or in this one:
     the command line's render and Blender's, with the two callables of the seam (``progress``,
-    ``should_stop``) and the optional ``preview(film)`` (tracer.methods.base.drive). Where the eye's
+    ``should_stop``) and the optional ``preview(film)`` (tracer.methods.base.drive); with ``scheduler``
+    (a Dask scheduler's address) on that cluster instead. Where the eye's
     pupil follows the image, a pilot finds it first (:func:`_follow_pupil`). Returns the integrator that
     rendered (rebuilt for that pupil) and the result. Raises
     :class:`~tracer.core.errors.StoppedBeforeFirstBatch` when ``should_stop`` ended the render before its
@@ -139,7 +140,11 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
     pupil = None
     if integrator.eye.spec.pupil_from_image:
         integrator, budget, pupil = _follow_pupil(integrator, budget, workers, should_stop)
-    if workers > 1:
+    if scheduler is not None:  # a Dask cluster (tracer.runtime.distributed): the same batches, the same image
+        from ..runtime.distributed import connect, render_dask
+
+        result = render_dask(integrator, budget, connect(scheduler), None, progress, should_stop, preview)
+    elif workers > 1:
         result = render_parallel(integrator, budget, workers, progress, should_stop, preview)
     else:
         result = integrator.render(budget, progress, should_stop, preview)
@@ -241,7 +246,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     if counts is not None:
         report["image"]["samples_per_pixel"] = {"mean": float(counts.mean()), "min": int(counts.min()),
                                                 "max": int(counts.max()), "unsampled_pixels": unsampled}
-    pending = world.accel is not None and not result.partial
+    pending = world.accel is not None
     report["analysis"] = "pending" if pending else "not run"  # what add_analysis adds: "done"
     report["analysis_seconds"] = None
     products = Products(image, y, var_y, preview, report, channels, attrs)
@@ -255,13 +260,23 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
     comparison, the HUD figures (symbols and background from the sections of
     :mod:`tracer.analysis.sections`) and the optical analysis from the scene's own eye; for a hybrid
     render the HUD figures read the symbols off the HUD channel and the background behind them off the
-    environment channel. Skipped (the blocks stay null) for a stopped render (``result.partial``: a
-    stop must end promptly) and a scene without geometry. Returns the seconds it took."""
+    environment channel. A stopped render (``result.partial``) gets its HUD figures only, marked
+    ``"partial": true`` (the figures of what it accumulated; the rest would delay the stop); a scene
+    without geometry none. Returns the seconds it took."""
     t0 = time.perf_counter()
-    if world.accel is None or result.partial:
+    if world.accel is None:
         return 0.0
     scene, film, report = world.scene, result.film, products.report
     sections = find_sections(world)
+    if result.partial:
+        channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
+        report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
+            if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
+        if report["hud"] is not None:
+            report["hud"]["partial"] = True
+        seconds = time.perf_counter() - t0
+        report["analysis"], report["analysis_seconds"] = "hud figures only (stopped render)", seconds
+        return seconds
     analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections)
     analysis["seconds"] = time.perf_counter() - t0
     counts = film.sample_counts()
@@ -291,7 +306,7 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
 
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
                  progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
-                 workers: int = 1, notice=None, eye: str = "centre"):
+                 workers: int = 1, notice=None, eye: str = "centre", scheduler: str | None = None):
     """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
     (report dict, RenderResult). ``notice(message)``, where given, hears the warnings that can be
     given before the first ray (:func:`aim_preflight`; the report repeats them from its own analysis)
@@ -306,7 +321,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     before its first batch ended has nothing to write and raises
     :class:`~tracer.core.errors.StoppedBeforeFirstBatch` (the folder keeps its earlier outputs). ``eye``:
     "left" or "right" renders what that eye of a binocular pair sees (tracer.scene.binocular; the
-    report's image block says which)."""
+    report's image block says which). ``scheduler``: a Dask scheduler's address, to render on that
+    cluster (tracer.runtime.distributed) instead of ``workers`` local processes."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
     if analyse:
@@ -319,8 +335,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
             for w in aim_preflight(world, method, integrator.renders_environment):
                 notice(f"before the first ray: {w}")
             integrator.notice = notice
-        integrator, result = run_render(integrator, budget, workers, progress, should_stop)
-        pending = analyse and integrator.world.accel is not None and not result.partial
+        integrator, result = run_render(integrator, budget, workers, progress, should_stop, scheduler=scheduler)
+        pending = analyse and integrator.world.accel is not None
         products = render_products(integrator.world, integrator, result, budget, analyse=False)
         if not pending:
             products.report["analysis"] = "not run"
@@ -331,8 +347,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         outputs.keep()
     finally:
         outputs.close()
-    if pending and should_stop is not None and should_stop():  # stopped as the image was written
-        pending = False
+    if pending and not result.partial and should_stop is not None and should_stop():
+        pending = False  # stopped as the image was written: report.json keeps "analysis": "pending"
     if pending:  # after the image is written: its figures follow in report.json, rewritten whole
         if progress is not None:
             progress(1.0, f"image written to {out_dir}; the analysis follows (report.json: HUD figures, brightness "

@@ -8,6 +8,8 @@ The scene folder travels once to the cluster, zipped in memory (no shared file s
 each worker unpacks it once, builds its own integrator and Embree scene, and traces the batches it
 is given. The parent merges films in batch order with the same rule as a local render, so the same
 seeds give the same image as one process. Dask is optional: ``pip install "dask[distributed]"``.
+The command line's ``--scheduler ADDRESS`` (render, sweep, hud-render) and Blender's Performance >
+Dask Scheduler connect through :func:`connect`.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import time
 import zipfile
 from pathlib import Path
 
+from ..core.errors import TracerError
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import drive
 from ..scene import EyeSpec, load_scene
@@ -80,8 +83,51 @@ class DaskExecutor:
         return handle.result()
 
 
+#: Seconds to wait for a scheduler to answer.
+CONNECT_TIMEOUT_S = 10.0
+_CLIENTS: dict[str, object] = {}
+
+
+class SchedulerError(TracerError):
+    """The Dask scheduler named cannot be used: Dask is not installed, or the address does not answer."""
+
+
+def connect(address: str):
+    """A client of the Dask scheduler at ``address`` ("tcp://host:8786"), kept for the session's next
+    renders; :class:`SchedulerError` (naming the address) when Dask is missing or the scheduler does not
+    answer within :data:`CONNECT_TIMEOUT_S`, and when it has no worker."""
+    if address in _CLIENTS:
+        return _CLIENTS[address]
+    try:
+        from distributed import Client
+    except ImportError:
+        raise SchedulerError(f"{address}: rendering on a Dask cluster needs Dask in this environment "
+                             "(pip install \"dask[distributed]\")") from None
+    try:
+        client = Client(address, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise SchedulerError(f"{address}: no Dask scheduler answers there within {CONNECT_TIMEOUT_S:g} s "
+                             f"({type(e).__name__}: {e}); start one with `dask scheduler` and workers with "
+                             f"`dask worker {address}`") from None
+    if not client.scheduler_info().get("workers"):
+        try:
+            client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as e:
+            client.close()
+            raise SchedulerError(f"{address}: the scheduler has no worker ({type(e).__name__}); start them with "
+                                 f"`dask worker {address}`") from None
+    _CLIENTS[address] = client
+    return client
+
+
+def close_clients():
+    """Close the session's clients (the command line does when its command ends)."""
+    while _CLIENTS:
+        _CLIENTS.popitem()[1].close()
+
+
 def render_dask(local, budget: Budget, client, in_flight: int | None = None, progress=None,
-                should_stop=None) -> RenderResult:
+                should_stop=None, preview=None) -> RenderResult:
     """Render on the cluster of ``client`` what the integrator ``local`` would render alone."""
     # a time budget counts the pilot and the upload of the scene
     started = time.perf_counter() if budget.since is None else budget.since
@@ -98,6 +144,8 @@ def render_dask(local, budget: Budget, client, in_flight: int | None = None, pro
                              key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
 
     result = drive(local, budget, DaskExecutor(client, submit, workers), in_flight or 2 * workers, progress,
-                   should_stop, f"dask x{workers}", started=started)
+                   should_stop, f"dask x{workers}", started=started, preview=preview)
     result.extra["dask_workers"] = workers
+    result.extra["workers"] = workers
+    result.extra["scheduler"] = client.scheduler.address
     return result

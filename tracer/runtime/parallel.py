@@ -26,11 +26,14 @@ hidden from the workers: they need only the tracer.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
+import hashlib
 import importlib.machinery
 import multiprocessing as mp
 import os
+import pickle
 import queue
 import signal
 import sys
@@ -55,14 +58,12 @@ READY = "ready"
 STARTUP_TIMEOUT = 600.0
 
 
-def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, options: dict, eye: dict, scene_hash: str,
-                 allow_external: bool, ready, ending):
-    """A worker's start: its own world (the scene folder's, seen by the parent's eye ``eye``, the fields
-    of an EyeSpec: a pupil that follows the image was chosen there), the integrator of ``method`` with
-    the parent's ``options`` (what its prepare decided), and the roulette's pilot. The folder must still
-    hold the parent's scene (``scene_hash``): one edited since, on disk or in the parent's memory, would
-    render another scene in the workers. Arguments are plain data: inside Blender nothing of the tracer
-    can be unpickled before tracer/runtime/worker_bootstrap.py ran."""
+def _init_worker(ready, ending):
+    """A worker's start: its signals (below), then the tracer's modules imported (what takes a fresh
+    process most of its start-up), then READY on ``ready``. Scenes come with the batches
+    (:func:`_job_integrator`), so that one pool serves every render of a session. Arguments are plain
+    data: inside Blender nothing of the tracer can be unpickled before tracer/runtime/worker_bootstrap.py
+    ran."""
     # The parent decides when to stop: a terminal's Ctrl-C or SIGHUP, and a batch scheduler's SIGTERM,
     # reach the whole process group, and a worker must not die of it mid-batch (the pool would start
     # another and wait for the lost batch forever). SIGTERM still ends a worker when the parent ends the
@@ -75,18 +76,33 @@ def _init_worker(scene_dir: str, method: str, seed: int, batch_size: int, option
     if hasattr(signal, "pthread_sigmask"):  # blocked since the parent spawned us: what came meanwhile lands now
         signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     keep_freed_memory()  # a worker process exists to trace
-    try:
-        scene = load_scene(scene_dir, allow_external=allow_external)
-        if scene.scene_hash != scene_hash:
-            raise RuntimeError(f"{scene_dir} holds another scene than the one the render began with (changed on disk "
-                               "since, or edited in memory: workers load the folder)")
-        integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
-        integrator.reference_luminance  # noqa: B018  (the pilot, before the clock starts)
-    except Exception as e:  # noqa: BLE001 - told to the parent, which stops the pool (a raise would respawn us)
-        ready.put(f"{type(e).__name__}: {e}")
-        return
-    _WORKER["integrator"] = integrator
     ready.put(READY)
+
+
+def _job_integrator(job: tuple):
+    """The integrator of a render's ``job`` (a key that names it, scene folder, method, seed, batch size,
+    options, eye, scene hash, external files allowed), built when a worker first traces one of its
+    batches and kept until another render's batch comes: its own world (the scene folder's, seen by
+    the parent's eye, the fields of an EyeSpec: a pupil that follows the image was chosen there), the
+    integrator with the parent's options (what its prepare decided), and the roulette's pilot. The
+    folder must still hold the parent's scene (``scene_hash``): one edited since, on disk or in the
+    parent's memory, would render another scene in the workers. A scene that cannot be built raises
+    RuntimeError "a worker process could not start: ...", which ends the render."""
+    key, scene_dir, method, seed, batch_size, options, eye, scene_hash, allow_external = job
+    if _WORKER.get("job") != key:
+        _WORKER.pop("integrator", None)
+        _WORKER.pop("job", None)
+        try:
+            scene = load_scene(scene_dir, allow_external=allow_external)
+            if scene.scene_hash != scene_hash:
+                raise RuntimeError(f"{scene_dir} holds another scene than the one the render began with (changed on "
+                                   "disk since, or edited in memory: workers load the folder)")
+            integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
+            integrator.reference_luminance  # noqa: B018  (the pilot)
+        except Exception as e:  # noqa: BLE001 - said to the parent in one line
+            raise RuntimeError(f"a worker process could not start: {type(e).__name__}: {e}") from None
+        _WORKER["integrator"], _WORKER["job"] = integrator, key
+    return _WORKER["integrator"]
 
 
 def quiet_resource_tracker():
@@ -106,6 +122,10 @@ def quiet_resource_tracker():
 
 def _run_batch(index: int):
     return _WORKER["integrator"].trace_batch(index)
+
+
+def _run_job_batch(job: tuple, index: int):
+    return _job_integrator(job).trace_batch(index)
 
 
 #: This package's import name ("tracer" on the command line; a subpackage inside Blender).
@@ -182,54 +202,124 @@ class _Local:
         self.index, self.result = index, None
 
 
-class PoolExecutor:
-    """The driver's executor over a multiprocessing pool: completions arrive on a queue. Until the first
-    worker has built its world (``starting``: the pool, its start-up queue and the integrator of the
-    parent), the parent traces the batches it hands out itself, so that a short budget is not spent
-    waiting for the workers to import the tracer and load the scene; a batch is seed-addressed, so the
-    image is the same whoever traced it."""
+class WorkerPool:
+    """``workers`` worker processes (spawned, with the stop signals blocked until their handlers are set)
+    that serve every render of a session: the command line's sweep, Blender's F12 after F12. Each
+    render hands its scene with its batches (:func:`_job_integrator`). Raises RuntimeError when no
+    Python interpreter for the workers is found (:func:`python_executable`)."""
 
-    def __init__(self, pool, workers: int, ready_queue, local):
-        self.pool = pool
+    def __init__(self, workers: int):
+        executable = python_executable()
+        if executable is None:
+            raise RuntimeError(f"no Python interpreter to run worker processes (sys.executable is {sys.executable})")
+        ctx = mp.get_context("spawn")
+        ctx.set_executable(executable)
+        quiet_resource_tracker()  # before the first semaphore: the queue's registers with it
         self.workers = workers
-        self.done: queue.Queue = queue.Queue()
-        self.ready_queue = ready_queue  # what workers put once their world is built; None once all are
-        self.local = local
+        self.ready_queue, self.ending = ctx.Queue(), ctx.Event()
+        initializer, initargs = _worker_init((self.ready_queue, self.ending))
+        # The workers start with the stop signals blocked (a blocked mask survives fork and exec), so that a
+        # Ctrl-C to the process group while they import does not end them with a traceback; _init_worker
+        # unblocks them once its handlers are set. Blocked here, a signal to this process waits (it is not
+        # lost) and lands when the mask is restored; the pool's own threads keep the mask and never take one.
+        masked = hasattr(signal, "pthread_sigmask")
+        previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if masked else None
+        try:
+            with _main_hidden():
+                self.pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
+        finally:
+            if masked:
+                signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
+        self.pids = {p.pid for p in self.pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
         self.ready = 0
-        self.pids = {p.pid for p in pool._pool}  # the pool's processes (a private attribute, stable since 3.2)
-        self.deadline = time.perf_counter() + STARTUP_TIMEOUT
         self.t0 = time.perf_counter()
         self.startup_seconds: float | None = None
+        self.used = False  # whether a batch was ever handed to it
 
-    def _poll_ready(self):
-        """Count the workers that have built their worlds; raise RuntimeError when one could not, or a worker
-        process exited while starting (the pool would start another in its place, forever)."""
-        if self.ready_queue is None:
-            return
+    def poll_ready(self) -> int:
+        """The workers that have started; RuntimeError when one could not, or a worker process exited
+        while starting (the pool would start another in its place, forever)."""
         while self.ready < self.workers:
             try:
                 msg = self.ready_queue.get_nowait()
             except queue.Empty:
                 if {p.pid for p in self.pool._pool} - self.pids or any(p.exitcode is not None for p in self.pool._pool):
                     raise RuntimeError("a worker process exited while starting (see its message above)") from None
-                if time.perf_counter() > self.deadline:
+                if time.perf_counter() - self.t0 > STARTUP_TIMEOUT:
                     raise RuntimeError(f"the worker processes did not start within {STARTUP_TIMEOUT:.0f} s") from None
-                return
+                break
             if msg != READY:
                 raise RuntimeError(f"a worker process could not start: {msg}")
             self.ready += 1
-        self.startup_seconds = time.perf_counter() - self.t0
-        self.ready_queue = None
+            if self.ready == self.workers:
+                self.startup_seconds = time.perf_counter() - self.t0
+        return self.ready
+
+    def alive(self) -> bool:
+        return self.pool._state == "RUN" and all(p.exitcode is None for p in self.pool._pool)  # noqa: SLF001
+
+    def close(self, terminate: bool = False):
+        """End the workers: let them finish what they hold (at most two batches each) and exit, or (an
+        error, an abort; a pool never used) terminate them. Pool.terminate() after batches were handed
+        out can hang in CPython's task handler (waiting for the inqueue's lock, never released), so a
+        pool in use is closed and joined."""
+        self.ending.set()  # the workers' SIGTERM ends them again
+        if terminate or not self.used:
+            self.pool.terminate()
+        else:
+            self.pool.close()
+        self.pool.join()
+
+
+#: The session's pool (:func:`shared_pool`).
+_SHARED: list[WorkerPool] = []
+
+
+def shared_pool(workers: int) -> WorkerPool:
+    """The session's pool of ``workers`` processes: the one already running, or a new one (one of another
+    size is closed first). :func:`close_shared_pool` ends it; so does the interpreter's exit."""
+    if _SHARED and (_SHARED[0].workers != workers or not _SHARED[0].alive()):
+        close_shared_pool()
+    if not _SHARED:
+        _SHARED.append(WorkerPool(workers))
+    return _SHARED[0]
+
+
+def close_shared_pool(terminate: bool = False):
+    """End the session's pool, if any (Blender's unregister, the interpreter's exit, an error)."""
+    if _SHARED:
+        _SHARED.pop().close(terminate)
+
+
+# At the interpreter's exit, as multiprocessing's own finaliser would: closing and joining there can wait
+# forever on a worker (the command line and Blender close the pool before, when their work ends).
+atexit.register(close_shared_pool, terminate=True)
+
+
+class PoolExecutor:
+    """The driver's executor over a :class:`WorkerPool`: completions arrive on a queue. Until the first
+    worker has started, the parent traces the batches it hands out itself (with ``local``, the
+    render's own integrator), so that a short budget is not spent waiting for the workers to import
+    the tracer; a batch is seed-addressed, so the image is the same whoever traced it. ``job``: the
+    render's scene and integrator as the workers build them (:func:`_job_integrator`)."""
+
+    def __init__(self, pool: WorkerPool, job: tuple, local):
+        self.pool = pool
+        self.workers = pool.workers
+        self.job = job
+        self.local = local
+        self.done: queue.Queue = queue.Queue()
 
     def submit(self, index: int):
-        self._poll_ready()
-        if self.ready == 0:
+        if self.pool.poll_ready() == 0:
             return _Local(index)
-        return self.pool.apply_async(_run_batch, (index,), callback=lambda _r, k=index: self.done.put(k),
-                                     error_callback=lambda _e, k=index: self.done.put(k))
+        self.pool.used = True
+        return self.pool.pool.apply_async(_run_job_batch, (self.job, index),
+                                          callback=lambda _r, k=index: self.done.put(k),
+                                          error_callback=lambda _e, k=index: self.done.put(k))
 
     def wait(self, handles: dict, timeout: float | None) -> list[int]:
-        self._poll_ready()
+        self.pool.poll_ready()
         local = [k for k, h in handles.items() if isinstance(h, _Local)]
         out = []
         if local:  # trace the first of the parent's own batches now (what the workers finished meanwhile too)
@@ -255,7 +345,8 @@ class PoolExecutor:
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None,
                     preview=None) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
-    folder, method, seed and batch size; see the module docstring). Raises RuntimeError when no
+    folder, method, seed and batch size; see the module docstring), on the session's pool
+    (:func:`shared_pool`: started by the first render, kept for the next). Raises RuntimeError when no
     Python interpreter for the workers is found (:func:`python_executable`), and
     :class:`tracer.core.validate.WorkersError` when the machine's memory does not hold ``workers``
     processes."""
@@ -263,48 +354,20 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     # a time budget counts the pilot and the workers' start-up
     started = time.perf_counter() if budget.since is None else budget.since
     budget = local.prepare(budget)  # before the workers take the batch size and the options
-    executable = python_executable()
-    if executable is None:
-        raise RuntimeError(f"no Python interpreter to run worker processes (sys.executable is {sys.executable})")
-    ctx = mp.get_context("spawn")
-    ctx.set_executable(executable)
-    quiet_resource_tracker()  # before the first semaphore: the queue's registers with it
-    ready, ending = ctx.Queue(), ctx.Event()
-    initializer, initargs = _worker_init((str(Path(local.scene.root)), local.name, local.seed, local.batch_size,
-                                          local.worker_options(), dataclasses.asdict(local.eye.spec),
-                                          local.scene.scene_hash, local.scene.allow_external, ready, ending))
-    # The workers start with the stop signals blocked (a blocked mask survives fork and exec), so that a
-    # Ctrl-C to the process group while they import does not end them with a traceback; _init_worker
-    # unblocks them once its handlers are set. Blocked here, a signal to this process waits (it is not
-    # lost) and lands when the mask is restored; the pool's own threads keep the mask and never take one.
-    masked = hasattr(signal, "pthread_sigmask")
-    previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if masked else None
+    pool = shared_pool(workers)
+    warm = pool.ready == workers
+    job = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size, local.worker_options(),
+           dataclasses.asdict(local.eye.spec), local.scene.scene_hash, local.scene.allow_external)
+    job = (hashlib.sha256(pickle.dumps(job)).hexdigest(), *job)  # the workers keep one job's integrator
     try:
-        with _main_hidden():
-            pool = ctx.Pool(workers, initializer=initializer, initargs=initargs)
-    finally:
-        if masked:
-            signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
-    with pool:  # leaving it on an error terminates the workers
-        try:
-            executor = PoolExecutor(pool, workers, ready, local)
-            result = drive(local, budget, executor, 2 * workers, progress, should_stop,
-                           f"x{workers}", started=started, preview=preview)
-            startup = executor.startup_seconds
-            if executor.ready == 0:  # the parent traced every batch: the workers, still starting, are ended
-                ending.set()
-                pool.terminate()
-            else:
-                # Batches still in flight are not needed, but the workers finish them (at most two each, of a
-                # few hundred milliseconds) rather than be terminated mid-batch: Pool.terminate() can hang in
-                # CPython's task handler (waiting for the inqueue's lock, never released).
-                pool.close()
-                pool.join()
-        except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
-            ending.set()  # the workers' SIGTERM ends them again: the pool's terminate follows
-            raise
+        result = drive(local, budget, PoolExecutor(pool, job, local), 2 * workers, progress, should_stop,
+                       f"x{workers}", started=started, preview=preview)
+    except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
+        close_shared_pool(terminate=True)
+        raise
+    if not pool.used:  # the parent traced every batch while the workers started: they are not kept waiting
+        close_shared_pool()
     result.extra["workers"] = workers
-    result.extra["startup_seconds"] = startup
+    result.extra["startup_seconds"] = 0.0 if warm else pool.startup_seconds
+    result.extra["pool"] = "reused" if warm else "started"
     return result
-
-

@@ -112,14 +112,15 @@ def optics_run(scene, folder: Path) -> dict:
 
 
 def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSet, workers: int = 1,
-              batch_size: int | None = None, progress=None, should_stop=None, on_run=None) -> SweepResult:
+              batch_size: int | None = None, progress=None, should_stop=None, on_run=None,
+              scheduler: str | None = None) -> SweepResult:
     """Render every grid point of ``plan`` with ``method``, ``budget`` (tracer.methods.Budget, per run)
     and ``seed`` (the same for every run) on ``workers`` processes, and write the sweep into the folder
     of ``outputs`` (:func:`open_outputs`; see the module docstring). ``progress(fraction, message)``
     follows the whole sweep; ``should_stop()`` true stops the current run as a render stops (its
     batches so far, marked partial) and starts no other: what was done is written, marked partial.
     ``on_run(result, run)`` is called after each run. ``method`` "optics" runs the optical analysis
-    (:func:`optics_run`) in place of a render.
+    (:func:`optics_run`) in place of a render. ``scheduler``: every run on that Dask cluster.
 
     Raises :class:`~tracer.products.outputs.OutputWriteError` if writing fails (the folder keeps its earlier
     sweep); KeyboardInterrupt (a second Ctrl-C) leaves the folder as it was."""
@@ -147,7 +148,7 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
             try:
                 report, rendered = render_scene(scene, method, budget, seed, staging / RUNS / str(k),
                                                 progress=_run_progress(progress, k, n), should_stop=should_stop,
-                                                batch_size=batch_size, workers=workers)
+                                                batch_size=batch_size, workers=workers, scheduler=scheduler)
             except StoppedBeforeFirstBatch:  # the run has no estimate: the sweep ends with the runs before it
                 result.stopped = True
                 break
