@@ -46,8 +46,22 @@ from pathlib import Path
 
 from .core.errors import STOP_SIGNALS, EstimateOverflowError, SceneError, StoppedBeforeFirstBatch
 
-#: When the command began (near the interpreter's start): a render's --seconds count from here.
-STARTED = time.perf_counter()
+
+def _process_start() -> float:
+    """``time.perf_counter()`` at this process's start (Linux: its start time in /proc/self/stat against
+    the system's uptime), else now: the interpreter's own start and the imports count toward --seconds."""
+    now = time.perf_counter()
+    try:
+        ticks = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19])
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        age = uptime - ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return now
+    return now - age if 0.0 <= age < 60.0 else now
+
+
+#: When the command began: a render's --seconds count from here.
+STARTED = _process_start()
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Limits of the render arguments (beyond them a render cannot be meant).
 MAX_SECONDS = 1e7
@@ -220,7 +234,7 @@ def cmd_render(args) -> int:
                 out = args.out if len(sides) == 1 else str(Path(args.out) / side)
                 report, result = render_scene(scene, args.method, budget, args.seed, out, progress=bar,
                                               should_stop=flag, batch_size=args.batch_size, workers=args.workers,
-                                              scheduler=args.scheduler,
+                                              scheduler=args.scheduler, keep_pool=side != sides[-1],
                                               analyse=not args.no_analysis, eye=side,
                                               notice=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
                 done.append((side, out, report))
@@ -647,8 +661,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = r.add_mutually_exclusive_group(required=True)
     b.add_argument("--rays", type=ray_count, help="budget in traced ray segments (5000000 or 5e6)")
     b.add_argument("--seconds", type=float,
-                   help="budget in wall-clock seconds from the command's start until the image is written (the "
-                        "analysis follows it into report.json)")
+                   help="budget in wall-clock seconds from the command's start (loading the scene included; writing "
+                        "the image set and then the analysis follow it)")
     r.add_argument("--seed", type=int, default=0,
                    help="the seed of the random streams, 0 to 2^63 - 1 (default 0): with --rays the same seed gives "
                         "the same image on any number of workers")

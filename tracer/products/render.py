@@ -127,11 +127,12 @@ def _follow_pupil(integrator, budget: Budget, workers: int, should_stop):
 
 
 def run_render(integrator, budget: Budget, workers: int = 1, progress=None, should_stop=None,
-               preview=None, scheduler: str | None = None) -> tuple[object, RenderResult]:
+               preview=None, scheduler: str | None = None, keep_pool: bool = True) -> tuple[object, RenderResult]:
     """Run ``integrator`` for ``budget`` on ``workers`` processes (tracer.runtime.parallel) or in this one:
     the command line's render and Blender's, with the two callables of the seam (``progress``,
     ``should_stop``) and the optional ``preview(film)`` (tracer.methods.base.drive); with ``scheduler``
-    (a Dask scheduler's address) on that cluster instead. Where the eye's
+    (a Dask scheduler's address) on that cluster instead; ``keep_pool`` false ends the worker pool with
+    the render (no render follows in this process). Where the eye's
     pupil follows the image, a pilot finds it first (:func:`_follow_pupil`). Returns the integrator that
     rendered (rebuilt for that pupil) and the result. Raises
     :class:`~tracer.core.errors.StoppedBeforeFirstBatch` when ``should_stop`` ended the render before its
@@ -145,7 +146,7 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
 
         result = render_dask(integrator, budget, connect(scheduler), None, progress, should_stop, preview)
     elif workers > 1:
-        result = render_parallel(integrator, budget, workers, progress, should_stop, preview)
+        result = render_parallel(integrator, budget, workers, progress, should_stop, preview, keep_pool)
     else:
         result = integrator.render(budget, progress, should_stop, preview)
     _check_started(result)
@@ -306,7 +307,8 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
 
 def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: str | Path,
                  progress=None, should_stop=None, batch_size: int | None = None, analyse: bool = True,
-                 workers: int = 1, notice=None, eye: str = "centre", scheduler: str | None = None):
+                 workers: int = 1, notice=None, eye: str = "centre", scheduler: str | None = None,
+                 keep_pool: bool = True):
     """Render ``scene`` with ``method`` into ``out_dir`` (on ``workers`` processes); returns
     (report dict, RenderResult). ``notice(message)``, where given, hears the warnings that can be
     given before the first ray (:func:`aim_preflight`; the report repeats them from its own analysis)
@@ -322,7 +324,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
     :class:`~tracer.core.errors.StoppedBeforeFirstBatch` (the folder keeps its earlier outputs). ``eye``:
     "left" or "right" renders what that eye of a binocular pair sees (tracer.scene.binocular; the
     report's image block says which). ``scheduler``: a Dask scheduler's address, to render on that
-    cluster (tracer.runtime.distributed) instead of ``workers`` local processes."""
+    cluster (tracer.runtime.distributed) instead of ``workers`` local processes; ``keep_pool``
+    (tracer.runtime.parallel.render_parallel) false when no render follows."""
     if method not in INTEGRATORS:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(INTEGRATORS)})")
     if analyse:
@@ -335,7 +338,8 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
             for w in aim_preflight(world, method, integrator.renders_environment):
                 notice(f"before the first ray: {w}")
             integrator.notice = notice
-        integrator, result = run_render(integrator, budget, workers, progress, should_stop, scheduler=scheduler)
+        integrator, result = run_render(integrator, budget, workers, progress, should_stop, scheduler=scheduler,
+                                        keep_pool=keep_pool)
         pending = analyse and integrator.world.accel is not None
         products = render_products(integrator.world, integrator, result, budget, analyse=False)
         if not pending:

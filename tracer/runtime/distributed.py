@@ -28,6 +28,7 @@ from ..methods.base import drive
 from ..scene import EyeSpec, load_scene
 from ..transport.eye import ThinLensEye
 from ..transport.world import World
+from .allocator import keep_freed_memory
 from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
 
 _UNPACKED: dict[str, str] = {}
@@ -49,6 +50,7 @@ def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_siz
     """Runs on a Dask worker: unpack the scene once, keep one integrator per render, trace a batch."""
     key = (digest, method, seed, batch_size, repr(options), repr(eye))
     if _WORKER.get("key") != key:
+        keep_freed_memory()  # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536: a batch took 4x as long
         if digest not in _UNPACKED:
             folder = Path(tempfile.mkdtemp(prefix="hud-dask-"))
             with zipfile.ZipFile(io.BytesIO(blob)) as z:

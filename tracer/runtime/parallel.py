@@ -258,21 +258,24 @@ class WorkerPool:
     def alive(self) -> bool:
         return self.pool._state == "RUN" and all(p.exitcode is None for p in self.pool._pool)  # noqa: SLF001
 
-    def close(self, terminate: bool = False):
+    def close(self, terminate: bool = False, wait: bool = True):
         """End the workers: let them finish what they hold (at most two batches each) and exit, or (an
         error, an abort; a pool never used) terminate them. Pool.terminate() after batches were handed
         out can hang in CPython's task handler (waiting for the inqueue's lock, never released), so a
-        pool in use is closed and joined."""
+        pool in use is closed and joined. ``wait`` false: the workers exit on their own while this
+        process goes on (:func:`close_shared_pool` joins them later)."""
         self.ending.set()  # the workers' SIGTERM ends them again
         if terminate or not self.used:
             self.pool.terminate()
         else:
             self.pool.close()
-        self.pool.join()
+        if wait:
+            self.pool.join()
 
 
-#: The session's pool (:func:`shared_pool`).
+#: The session's pool (:func:`shared_pool`), and pools closed without waiting for their workers' exit.
 _SHARED: list[WorkerPool] = []
+_CLOSING: list[WorkerPool] = []
 
 
 def shared_pool(workers: int) -> WorkerPool:
@@ -285,10 +288,17 @@ def shared_pool(workers: int) -> WorkerPool:
     return _SHARED[0]
 
 
-def close_shared_pool(terminate: bool = False):
-    """End the session's pool, if any (Blender's unregister, the interpreter's exit, an error)."""
+def close_shared_pool(terminate: bool = False, wait: bool = True):
+    """End the session's pool, if any (Blender's unregister, the interpreter's exit, an error); with
+    ``wait`` false its workers exit on their own while this process goes on (a render that no other
+    follows: their memory is free for its outputs), and a later call joins them."""
     if _SHARED:
-        _SHARED.pop().close(terminate)
+        pool = _SHARED.pop()
+        pool.close(terminate, wait)
+        if not wait:
+            _CLOSING.append(pool)
+    while wait and _CLOSING:
+        _CLOSING.pop().pool.join()
 
 
 # At the interpreter's exit, as multiprocessing's own finaliser would: closing and joining there can wait
@@ -343,10 +353,11 @@ class PoolExecutor:
 
 
 def render_parallel(local, budget: Budget, workers: int = 2, progress=None, should_stop=None,
-                    preview=None) -> RenderResult:
+                    preview=None, keep_pool: bool = True) -> RenderResult:
     """Render with ``workers`` processes what the integrator ``local`` would render alone (its scene
     folder, method, seed and batch size; see the module docstring), on the session's pool
-    (:func:`shared_pool`: started by the first render, kept for the next). Raises RuntimeError when no
+    (:func:`shared_pool`: started by the first render, kept for the next unless ``keep_pool`` is false:
+    then it ends with this render, so that its workers' memory is free for the outputs). Raises RuntimeError when no
     Python interpreter for the workers is found (:func:`python_executable`), and
     :class:`tracer.core.validate.WorkersError` when the machine's memory does not hold ``workers``
     processes."""
@@ -365,8 +376,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
         close_shared_pool(terminate=True)
         raise
-    if not pool.used:  # the parent traced every batch while the workers started: they are not kept waiting
-        close_shared_pool()
+    if not pool.used or not keep_pool:  # not kept waiting: the parent traced every batch, or no render follows
+        close_shared_pool(wait=False)
     result.extra["workers"] = workers
     result.extra["startup_seconds"] = 0.0 if warm else pool.startup_seconds
     result.extra["pool"] = "reused" if warm else "started"
