@@ -81,13 +81,17 @@ def finish_analysis(scene_name: str | None = None):
 
 
 def _analyse_later(scene_name: str, products, world, integrator, result):
-    """The analysis (tracer.products.render.add_analysis: HUD figures, brightness theorem, optics) of a
-    render whose image is already in the Render Result, in a thread of its own: the report in REPORTS
+    """The false-colour view (FALSE_COLOUR) and the analysis (tracer.products.render.add_analysis: HUD
+    figures, brightness theorem, optics) of a render whose image is already in the Render Result, in a
+    thread of its own: the report in REPORTS
     (and LAST_RENDER, while it is still this render's) reads "analysis": "pending" until it is done. The
     analysis touches no Blender data."""
     run_id = products.report["run_id"]
 
     def run():
+        FALSE_COLOUR[scene_name] = false_colour(products.y)
+        if products.report["analysis"] != "pending":
+            return
         try:
             add_analysis(products, world, integrator, result)
         except Exception as e:  # noqa: BLE001 - a fault of the tracer: said in the report, not lost in a thread
@@ -165,7 +169,8 @@ def render_final(engine, depsgraph) -> dict:
     {"stopped": ...} when test_break ended the render before its first batch (the result stays empty)."""
     scene = depsgraph.scene
     s = scene.hud
-    budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds)
+    # Seconds count from F12, as the command line's from its start: the export and loading are part of them
+    budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds, since=time.perf_counter())
     if (message := unsupported_output(scene)) is not None:
         return _fail(engine, scene, message)
     with tempfile.TemporaryDirectory(prefix="hud-blender-") as tmp:
@@ -238,9 +243,8 @@ def render_final(engine, depsgraph) -> dict:
     LAST_RENDER.clear()
     LAST_RENDER.update(report)
     REPORTS[scene.name] = report
-    FALSE_COLOUR[scene.name] = false_colour(products.y)
-    if report["analysis"] == "pending":  # the image is shown; its figures follow into the report
-        _analyse_later(scene.name, products, integrator.world, integrator, result)
+    FALSE_COLOUR.pop(scene.name, None)  # the false-colour view follows, with the analysis
+    _analyse_later(scene.name, products, integrator.world, integrator, result)
     return dict(report)
 
 

@@ -262,9 +262,13 @@ class HUD_OT_show_false_colour(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.scene.name in engine.FALSE_COLOUR
+        return context.scene.name in engine.FALSE_COLOUR or context.scene.name in engine.ANALYSES
 
     def execute(self, context):
+        engine.finish_analysis(context.scene.name)  # the view is made after the image, with the analysis
+        if context.scene.name not in engine.FALSE_COLOUR:
+            self.report({"ERROR"}, "Show False Colour: no render of this scene to show")
+            return {"CANCELLED"}
         rgb, info = engine.FALSE_COLOUR[context.scene.name]
         show_image(context, "HUD False Colour", rgb)
         self.report({"INFO"}, f"HUD False Colour: {info['lo']:.3g} to {info['hi']:.3g} cd/m² ({info['decades']} "

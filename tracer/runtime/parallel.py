@@ -366,7 +366,7 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     started = time.perf_counter() if budget.since is None else budget.since
     budget = local.prepare(budget)  # before the workers take the batch size and the options
     pool = shared_pool(workers)
-    warm = pool.ready == workers
+    warm = pool.poll_ready() == workers
     job = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size, local.worker_options(),
            dataclasses.asdict(local.eye.spec), local.scene.scene_hash, local.scene.allow_external)
     job = (hashlib.sha256(pickle.dumps(job)).hexdigest(), *job)  # the workers keep one job's integrator
@@ -376,7 +376,7 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
         close_shared_pool(terminate=True)
         raise
-    if not pool.used or not keep_pool:  # not kept waiting: the parent traced every batch, or no render follows
+    if not keep_pool:  # no render follows: the workers exit while the image is written
         close_shared_pool(wait=False)
     result.extra["workers"] = workers
     result.extra["startup_seconds"] = 0.0 if warm else pool.startup_seconds
