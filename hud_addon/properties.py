@@ -5,6 +5,8 @@ PointerProperty per datablock type. The fields of materials, of the emission blo
 analyser and of the methods' options come from the tracer's schemas (hud_addon/schema_ui.py), so a
 new material or option needs no change here."""
 
+import dataclasses
+
 import bpy
 from bpy.props import (
     BoolProperty,
@@ -147,6 +149,19 @@ def _scene_annotations() -> dict:
     return ann
 
 
+def _per_role_descriptions() -> dict[str, str]:
+    """For a material field that several roles share under one property (Reflectance: a mirror's specular
+    reflectance, a Lambertian surface's albedo) but describe differently, one tooltip that gives each
+    role's meaning ("Mirror: specular reflectance, 0..1. Lambertian: diffuse albedo, 0..1.")."""
+    meanings: dict[str, dict[str, list[str]]] = {}
+    for cls in MATERIALS.values():
+        for f in cls.schema.fields:
+            if f.description:
+                meanings.setdefault(f.name, {}).setdefault(f.description.rstrip("."), []).append(cls.schema.label)
+    return {name: ". ".join(f"{', '.join(roles)}: {text[0].lower()}{text[1:]}" for text, roles in by_text.items())
+            for name, by_text in meanings.items() if len(by_text) > 1}  # the tooltip adds the last full stop
+
+
 def _object_annotations() -> dict:
     check_consistent([cls.schema for cls in MATERIALS.values()])
     ann = {
@@ -161,8 +176,11 @@ def _object_annotations() -> dict:
                                                "in the object's own coordinates, mm) as a preset gave them, JSON: "
                                                "hits on the faces that lie on one take its shape and normal"),
     }
+    described = _per_role_descriptions()
     for cls in MATERIALS.values():
-        annotations(cls.schema.fields, "", cls.schema.alternatives, ann)
+        fields = tuple(dataclasses.replace(f, description=described.get(f.name, f.description))
+                       for f in cls.schema.fields)
+        annotations(fields, "", cls.schema.alternatives, ann)
     ann |= _aim("")
     ann |= _aim("light_", "Light aim", "Guidance of eye paths (backward method) toward the aperture through which "
                                        "this surface's light arrives, e.g. a condenser's face")

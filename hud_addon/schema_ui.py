@@ -139,7 +139,11 @@ def draw(layout, owner, fields, prefix: str = "", alternatives=()):
                               + (f" ({image.colorspace_settings.name})" if image is not None else ""))
         else:
             shown = SHOWN.format(prefix + f.name)
-            layout.prop(owner, shown if shown in owner.bl_rna.properties else prefix + f.name)
+            if shown in owner.bl_rna.properties:  # a length or angle, shown in the scene's own units
+                layout.prop(owner, shown)
+            else:  # the unit beside the name (cd/m^2, lm, mrad ...), not only in the tooltip
+                unit = f" ({f.unit.replace('^2', '²')})" if f.unit not in ("", "1") else ""
+                layout.prop(owner, prefix + f.name, text=f"{f.title}{unit}")
 
 
 #: Blender colour spaces whose byte values the tracer reads as sRGB-encoded, and those it reads as they

@@ -197,3 +197,49 @@ def test_polarisation_in_blender_eye_analyser_mode_and_polarising_materials(tmp_
             expected = sunglasses["analyser"].get(f.name, f.default)
             assert sunglasses["built"][f.name] == pytest.approx(expected, abs=1e-6), f.name
         assert sunglasses["polarisation"] == sunglasses["raw_polarisation"]
+
+
+class _LabelLayout(_PropLayout):
+    """Records (property, label text) of every row drawn."""
+
+    def prop(self, owner, name, **kw):
+        self.names.append((name, kw.get("text")))
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "grid_flow"):
+            return lambda *a, **k: _LabelLayout(self.names)
+        return lambda *a, **k: None
+
+
+def scenario_role_fields():
+    """A Lambertian panel that emits, drawn in the HUD Optical Role panel: the rows and their labels, and
+    the tooltip of Reflectance (one property that the mirror, the coating and the Lambertian roles share)."""
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.mesh.primitive_plane_add(size=10)
+    obj = bpy.context.object
+    obj.hud.role, obj.hud.emits = "lambertian", True
+    rows = []
+
+    class Panel:
+        layout = _LabelLayout(rows)
+
+    sys.modules[f"{module}.hud_addon.ui"].HUD_PT_object.draw(Panel(), bpy.context)
+    tooltip = obj.hud.bl_rna.properties["reflectance"].description
+    disable(module)
+    return {"rows": rows, "tooltip": tooltip}
+
+
+def test_a_role_s_fields_say_what_they_mean_for_it_and_their_units():
+    """Issue 31's walk-through: a Lambertian surface's Reflectance read "Specular reflectance (at normal
+    incidence for a metal)" (the mirror's meaning of the shared property), and Emission's luminance
+    showed no unit. The tooltip now gives each role's meaning, the Lambertian's albedo among them, and
+    rows with a unit show it beside the name."""
+    res, _ = in_blender(scenario_role_fields)
+    tip = res["tooltip"]
+    assert "Lambertian reflector: diffuse albedo" in tip and "Mirror: " in tip, tip
+    labels = dict(res["rows"])
+    assert labels.get("emission_luminance") == "Luminance (cd/m²)", res["rows"]
