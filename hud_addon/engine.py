@@ -68,6 +68,30 @@ LAST_RENDER: dict = {}
 REPORTS: dict[str, dict] = {}
 #: The false-colour view of each scene's last render: (sRGB uint8 (H', W', 3), its info).
 FALSE_COLOUR: dict[str, tuple] = {}
+#: Scenes whose current F12 reached the engine (render_init clears it): an F12 that Blender refused (no
+#: camera, ...) runs the render handlers without the engine, and its scene's figures are dropped.
+ENGINE_RAN: set[str] = set()
+#: Scenes whose last F12 Blender refused: the HUD Readouts panel says so instead of an earlier render's figures.
+REFUSED: set[str] = set()
+
+
+@bpy.app.handlers.persistent
+def _render_begins(scene, *_):
+    """render_init handler: this F12 has not reached the engine yet."""
+    ENGINE_RAN.discard(scene.name)
+
+
+@bpy.app.handlers.persistent
+def _render_ends(scene, *_):
+    """render_post and render_cancel handler: where the engine never ran (Blender refused the render), the
+    scene's last figures are dropped, so that the readouts do not show them as this F12's."""
+    if scene.render.engine == "HUD_TRACER" and scene.name not in ENGINE_RAN:
+        finish_analysis(scene.name)
+        REPORTS.pop(scene.name, None)
+        FALSE_COLOUR.pop(scene.name, None)
+        REFUSED.add(scene.name)
+
+
 #: The analysis that follows each scene's last render into its report (a thread: see :func:`render_final`).
 ANALYSES: dict[str, threading.Thread] = {}
 
@@ -168,6 +192,8 @@ def render_final(engine, depsgraph) -> dict:
     """Render the depsgraph's scene into ``engine``'s result. Returns the report, or {"error": ...}, or
     {"stopped": ...} when test_break ended the render before its first batch (the result stays empty)."""
     scene = depsgraph.scene
+    ENGINE_RAN.add(scene.name)
+    REFUSED.discard(scene.name)
     s = scene.hud
     # Seconds count from F12, as the command line's from its start: the export and loading are part of them
     budget = Budget(rays=s.rays) if s.budget == "RAYS" else Budget(seconds=s.seconds, since=time.perf_counter())
@@ -303,9 +329,14 @@ class HudRenderEngine(bpy.types.RenderEngine):
 _register_classes, _unregister_classes = bpy.utils.register_classes_factory((HudRenderEngine,))
 
 
+_HANDLERS = (("render_write", write_beside), ("render_init", _render_begins), ("render_post", _render_ends),
+             ("render_cancel", _render_ends))
+
+
 def register():
     _register_classes()
-    bpy.app.handlers.render_write.append(write_beside)
+    for kind, handler in _HANDLERS:
+        getattr(bpy.app.handlers, kind).append(handler)
 
 
 def unregister():
@@ -313,6 +344,7 @@ def unregister():
 
     finish_analysis()  # no thread of ours outlives the add-on
     close_shared_pool()  # the session's worker processes, kept from F12 to F12, end with the add-on
-    if write_beside in bpy.app.handlers.render_write:
-        bpy.app.handlers.render_write.remove(write_beside)
+    for kind, handler in _HANDLERS:
+        if handler in getattr(bpy.app.handlers, kind):
+            getattr(bpy.app.handlers, kind).remove(handler)
     _unregister_classes()

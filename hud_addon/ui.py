@@ -81,7 +81,9 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
         scene = context.scene
         col = self.layout.column()
         report = engine.REPORTS.get(scene.name)
-        if report is None:
+        if report is None and scene.name in engine.REFUSED:
+            col.label(text="Blender refused the last render (its message says why): no figures", icon="ERROR")
+        elif report is None:
             col.label(text="Render (F12) to see the figures of the image")
         else:
             grid = col.grid_flow(row_major=True, columns=2, even_columns=False)

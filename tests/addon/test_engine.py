@@ -364,3 +364,49 @@ def test_a_study_preset_renders_in_blender_with_its_channels_and_its_eye(tmp_pat
     ch = read_multilayer(tmp_path / "study.exr")
     np.testing.assert_allclose(ch["ViewLayer.Combined.G"], ch["ViewLayer.HUD.G"] + ch["ViewLayer.Environment.G"],
                                rtol=1e-5, atol=1e-2)
+
+
+def scenario_refused():
+    """analytic-mirror rendered (F12), then F12 without a camera (Blender refuses it), then with the camera
+    again: the scene's figures after each, and what the HUD Readouts panel says after the refusal."""
+    import bpy
+
+    from tests.support.blender import Layout, disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    bpy.ops.hud.add_preset(preset="analytic-mirror")
+    scene = bpy.context.scene
+    scene.hud.method, scene.hud.budget, scene.hud.rays = "backward", "RAYS", 200_000
+    engine_mod = sys.modules[f"{module}.hud_addon.engine"]
+    ui_mod = sys.modules[f"{module}.hud_addon.ui"]
+    bpy.ops.render.render()
+    first = scene.name in engine_mod.REPORTS
+    camera, scene.camera = scene.camera, None
+    try:
+        bpy.ops.render.render()
+        refused = ""
+    except RuntimeError as e:
+        refused = str(e)
+    labels = []
+
+    class Panel:
+        layout = Layout(labels)
+
+    ui_mod.HUD_PT_readouts.draw(Panel(), bpy.context)
+    after_refusal = scene.name in engine_mod.REPORTS
+    scene.camera = camera
+    bpy.ops.render.render()
+    again = scene.name in engine_mod.REPORTS and scene.name not in engine_mod.REFUSED
+    disable(module)
+    return {"first": first, "refused": refused, "after_refusal": after_refusal, "labels": labels, "again": again}
+
+
+def test_readouts_are_cleared_when_blender_refuses_to_render():
+    """Issue 31's walk-through: when Blender refused to render (no camera), HUD Readouts kept the previous
+    render's figures, as if they were this F12's. The render handlers run even for a refused F12, the
+    engine does not: the scene's figures are dropped and the panel says the render was refused; the next
+    F12 that renders shows its own figures."""
+    res, _ = in_blender(scenario_refused)
+    assert res["first"] and "camera" in res["refused"], res
+    assert not res["after_refusal"] and any("refused the last render" in str(x) for x in res["labels"]), res
+    assert res["again"]
