@@ -54,13 +54,6 @@ class Columns:
         self.idx, self.values = state
 
 
-def _pack(a: np.ndarray):
-    """A per-pixel array (pixels,) or (k, pixels) as it travels: its non-zero columns
-    (:class:`Columns`) where they are fewer than :data:`SPARSE_SHARE` of the pixels, else whole."""
-    idx = np.flatnonzero(a if a.ndim == 1 else a.any(axis=0))
-    return Columns(idx, a[..., idx]) if len(idx) < SPARSE_SHARE * a.shape[-1] else a
-
-
 def _add(total: np.ndarray, a) -> None:
     """``total += a`` for a dense array or :class:`Columns` (the same bits either way: x + 0 = x)."""
     if isinstance(a, Columns):
@@ -215,32 +208,9 @@ class Film:
             else next(iter(self.groups.values())).sq
 
     # -- filling (one batch) ---------------------------------------------------------------------
-    def record_batch(self, splats: Splats, replicates: int, normalisers: dict[str, int], group: str = ""):
-        """Add one batch of the components of ``group`` (see :func:`batch_arrays`)."""
-        names = [k for k in self.kinds if self.group_of[k] == group]
-        self.merge_arrays(batch_arrays(names, self.pixels, splats, replicates, normalisers), group=group)
-
     # -- merging ---------------------------------------------------------------------------------
-    def arrays(self) -> tuple:
-        """Everything this film holds, as arrays and numbers (:meth:`merge_arrays` adds it to another);
-        each per-pixel array whole or as its non-zero columns."""
-        names = list(self.kinds)
-        every = np.arange(self.pixels)
-
-        def norm(k):
-            v = self.norm[k]
-            return v if not isinstance(v, np.ndarray) else Columns(every, v)
-
-        groups = {}
-        for g, r in self.groups.items():
-            if r.pixel_count is not None:
-                raise ValueError("a film whose batches covered part of the image merges batch by batch")
-            groups[g] = (_pack(r.sq), r.mean_sum, r.mean_sq, r.count, None)
-        return (names, [_pack(self.sums[k]) for k in names], [norm(k) for k in names],
-                [_pack(self.comp_rep_sq[k]) for k in names], groups)
-
     def merge_arrays(self, data: tuple, prefix: str = "", group: str | None = None):
-        """Add a batch's arrays (:func:`batch_arrays`) or another film's (:meth:`arrays`); with ``prefix``,
+        """Add a batch's arrays (:func:`batch_arrays`); with ``prefix``,
         its components are this film's ``prefix + name``, and with ``group`` its replicate sums go to that
         group of this film (the hybrid method merges each channel's batch so)."""
         names, sums, norms, c_sq, groups = data
@@ -249,21 +219,15 @@ class Film:
             k = prefix + k
             _add(self.sums[k], sums[i])
             n = norms[i]
-            if isinstance(n, (np.ndarray, Columns)):
+            if isinstance(n, np.ndarray):  # the pixels a batch sampled once each
                 if not isinstance(self.norm[k], np.ndarray):
                     self.norm[k] = np.full(self.pixels, self.norm[k], np.int32)
-                if isinstance(n, Columns):
-                    self.norm[k][n.idx] += n.values
-                else:
-                    self.norm[k][n] += 1
+                self.norm[k][n] += 1
             else:
                 self.norm[k] += n
             _add(self.comp_rep_sq[k], c_sq[i])
         for g, rep in groups.items():
             self.groups[g if group is None else group].merge(rep)
-
-    def merge(self, other: Film):
-        self.merge_arrays(other.arrays())
 
     # -- results ---------------------------------------------------------------------------------
     def finite(self) -> bool:
@@ -272,13 +236,11 @@ class Film:
         arrays = [*self.sums.values(), *self.comp_rep_sq.values(), *(g.sq for g in self.groups.values())]
         return all(bool(np.isfinite(a).all()) for a in arrays)
 
-    def _divided(self, name: str) -> np.ndarray:
+    def _divisor(self, name: str):
+        """What a component's sums are divided by: its normaliser, at least 1 (per pixel where batches
+        covered part of the image)."""
         n = self.norm[name]
-        return self.sums[name] / (np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1))
-
-    def component_rgb(self, name: str) -> np.ndarray:
-        """(H, W, 3) one component's estimate, cd/m^2."""
-        return np.ascontiguousarray(self._divided(name).T).reshape(self.height, self.width, 3)
+        return np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
 
     def rgb(self, group: str | None = None) -> np.ndarray:
         """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
@@ -286,8 +248,7 @@ class Film:
         out = np.zeros((self.pixels, 3))
         for name in self.kinds:
             if group is None or self.group_of[name] == group:
-                n = self.norm[name]
-                n = np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
+                n = self._divisor(name)
                 for c in range(3):  # a channel at a time: the same numbers as the whole (3, pixels) at once
                     out[:, c] += self.sums[name][c] / n
         return out.reshape(self.height, self.width, 3)
@@ -298,9 +259,8 @@ class Film:
         y = np.zeros(self.pixels)
         for k in names:
             if k not in self._lum:
-                n = self.norm[k]
-                n = np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
-                s = self.sums[k]  # luminance3 of the divided sums, a channel at a time (the same terms)
+                # luminance3 of the divided sums, a channel at a time (the same terms)
+                n, s = self._divisor(k), self.sums[k]
                 lum = (s[0] / n) * Y_WEIGHTS[0]
                 lum += (s[1] / n) * Y_WEIGHTS[1]
                 lum += (s[2] / n) * Y_WEIGHTS[2]

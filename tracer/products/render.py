@@ -269,25 +269,24 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
         return 0.0
     scene, film, report = world.scene, result.film, products.report
     sections = find_sections(world)
+    sections_seconds = time.perf_counter() - t0
+    channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
+    report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
+        if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
     if result.partial:
-        channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
-        report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
-            if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
         if report["hud"] is not None:
             report["hud"]["partial"] = True
         seconds = time.perf_counter() - t0
         report["analysis"], report["analysis_seconds"] = "hud figures only (stopped render)", seconds
         return seconds
+    t1 = time.perf_counter()
     analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections)
-    analysis["seconds"] = time.perf_counter() - t0
+    analysis["seconds"] = sections_seconds + time.perf_counter() - t1  # the sections are its too
     counts = film.sample_counts()
     unmeasured = 0 if counts is None else int((counts < MIN_REPLICATES).sum())
     if unmeasured:  # a render stopped before two samples per pixel: no error bars to judge a difference by
         analysis["not_comparable"].append(f"{unmeasured:,} pixels hold fewer than {MIN_REPLICATES} samples, so "
                                           "the rendered means have no error bars to compare by")
-    channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
-    report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
-        if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
     report["brightness_theorem"] = analysis
     report["warnings"] += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
     if not unmeasured:
