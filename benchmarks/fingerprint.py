@@ -44,6 +44,7 @@ def fingerprints(rays: int, seed: int, polarisation: str | None = None) -> dict:
             for variant in VARIANTS:
                 res = make(world, variant, seed).render(Budget(rays=rays))
                 h = hashlib.sha256()
+                res.film.make_dense()  # the arrays over every pixel, as the fingerprints were first taken
                 for k in sorted(res.film.kinds):
                     h.update(np.ascontiguousarray(res.film.sums[k]).tobytes())
                 h.update(res.film.rep_sq.tobytes())

@@ -35,6 +35,7 @@ def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path)
         return out
 
     def arrays_of(film):
+        film.make_dense()
         return ([film.sums[k] for k in film.kinds] + [film.comp_rep_sq[k] for k in film.kinds]
                 + [g.sq for g in film.groups.values()])
 
@@ -53,3 +54,39 @@ def test_batches_travel_as_their_lit_pixels_and_merge_to_the_same_bits(tmp_path)
         assert a.replicates == b.replicates > 0 and a.norm == b.norm
         for x, y in zip(arrays_of(a), arrays_of(b), strict=True):
             assert np.array_equal(x, y) and x.any(), method
+
+
+def test_a_film_holds_the_pixels_sampled_so_far_and_gives_the_same_numbers(tmp_path):
+    """Backward batches smaller than the image (4,096 of hud-direct's 65,520 pixels) merge into a film
+    that holds only the pixels sampled so far (tracer.core.film: compact layout) until they pass
+    COMPACT_SHARE of the retina, then every pixel. At each step its image, variance, sample counts,
+    normalisers and replicate counts are those of a film that held every pixel from the start, bit for
+    bit (the mean's standard error sums in another order: to 1e-12)."""
+    from tracer.core.film import COMPACT_SHARE
+
+    world = World(load_scene(PRESETS["hud-direct"].write(tmp_path / "s")))
+    integ = INTEGRATORS["backward"](world, 5, batch_size=4096)
+    npix = world.eye.width * world.eye.height
+    compact, dense = integ.new_film(), integ.new_film()
+    dense.make_dense()
+    assert dense.dense and not compact.dense
+    seen = []
+    for k in range(6):
+        batch = integ.trace_batch(k)
+        compact.merge_arrays(batch.film)
+        dense.merge_arrays(batch.film)
+        seen.append(compact.dense)
+        assert np.array_equal(compact.rgb(), dense.rgb())
+        assert np.array_equal(compact.variance_y(), dense.variance_y())
+        assert np.array_equal(compact.sample_counts(), dense.sample_counts())
+        for name in compact.kinds:
+            assert compact.count_summary(name) == dense.count_summary(name)
+            assert np.array_equal(compact.component_y(name), dense.component_y(name))
+            assert np.array_equal(compact.component_variance_y(name), dense.component_variance_y(name))
+        assert compact.replicates == dense.replicates == 0  # most pixels hold no sample yet
+        assert compact.mean_standard_error() == pytest.approx(dense.mean_standard_error(), rel=1e-12)
+        assert compact.finite()
+    # compact while the sampled pixels are at most COMPACT_SHARE of the retina, dense after
+    sampled = np.cumsum([len(integ.batch_pixels(k)) for k in range(6)])  # 4,095 each: 16 parts of a pass
+    assert seen == list(sampled > COMPACT_SHARE * npix) and not seen[0] and seen[-1]
+    assert compact.count_summary("hit") == (sampled[-1] / npix, 0, 1)

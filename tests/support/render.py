@@ -30,6 +30,8 @@ def films_match(a: RenderResult, b: RenderResult, rtol: float = 1e-12) -> bool:
     """Whether two results hold the same film up to rounding in the last bits (the determinism
     check of the tests: independent sampling would differ by far more)."""
     fa, fb = a.film, b.film
+    fa.make_dense()
+    fb.make_dense()
     norms_equal = all(np.array_equal(fa.norm[k], fb.norm[k]) for k in fa.kinds)
     return (norms_equal and fa.replicates == fb.replicates
             and all(np.allclose(fa.sums[k], fb.sums[k], rtol=rtol, atol=0) for k in fa.kinds)

@@ -23,6 +23,13 @@ backward batch's paths that hit a source) travels as its non-zero columns only (
 on hud-direct a forward batch's film is 0.14 MiB, a backward one's 3.5 MiB); adding it gives the
 same bits as adding the dense array, whose other columns are zeros.
 
+Layout. A film keeps its per-pixel arrays over the pixels sampled so far, in the order they were
+first sampled (a compact layout: memory and merges cost by the samples, not by the retina's pixels),
+until those are :data:`COMPACT_SHARE` of the retina, and from then on over every pixel. A render
+stopped after a few batches of a 4K retina (backward batches spread their samples over the whole
+image) so holds a few MB, not 0.7 GB, and its merges touch no page they do not write. The layout
+changes no number: every pixel's sums are the same additions in the same order.
+
 Groups. Components traced independently of each other (the hybrid method's channels: each its own
 method, its own random streams, its own replicates) form groups; each group keeps its own replicate
 sums, and the image's variance is the sum of the groups' variances (independent estimates add).
@@ -37,6 +44,10 @@ from .units import Y_WEIGHTS, luminance3
 #: A batch's per-pixel array travels as its non-zero columns (:class:`Columns`) when they are fewer
 #: than this share of the pixels.
 SPARSE_SHARE = 0.25
+
+#: A film keeps its arrays over the pixels sampled so far until they are this share of the retina,
+#: then over every pixel (:class:`Film`).
+COMPACT_SHARE = 0.25
 
 
 class Columns:
@@ -54,12 +65,18 @@ class Columns:
         self.idx, self.values = state
 
 
-def _add(total: np.ndarray, a) -> None:
-    """``total += a`` for a dense array or :class:`Columns` (the same bits either way: x + 0 = x)."""
+def _add(total: np.ndarray, a, place) -> None:
+    """``total += a`` for a dense array or :class:`Columns`, whose pixels are at ``place(pixels)`` of
+    ``total`` (the same bits either way: x + 0 = x)."""
     if isinstance(a, Columns):
-        total[..., a.idx] += a.values
+        total[..., place(a.idx)] += a.values
     else:
         total += a
+
+
+def _filled(shape: tuple, fill, dtype) -> np.ndarray:
+    """An array of ``fill`` (zeros left to the kernel: pages nobody writes cost no memory)."""
+    return np.zeros(shape, dtype) if fill == 0 else np.full(shape, fill, dtype)
 
 
 def _columns(cols: np.ndarray, a: np.ndarray, npix: int):
@@ -83,29 +100,28 @@ class _Replicates:
     covers, each a replicate of that pixel)."""
 
     def __init__(self, n: int):
-        self.sq = np.zeros(n)
+        self.sq = np.zeros(n)  # over the film's layout (Film)
         self.mean_sum = 0.0
         self.mean_sq = 0.0
         self.count = 0
         self.pixel_count: np.ndarray | None = None
 
     def counts(self):
-        """Replicates per pixel: the count, plus ``pixel_count`` where batches cover part of the image."""
+        """Replicates per pixel of the film's layout: the count, plus ``pixel_count`` where batches cover
+        part of the image."""
         return self.count if self.pixel_count is None else self.pixel_count + self.count
 
-    def fewest(self) -> int:
-        return int(self.count if self.pixel_count is None else self.pixel_count.min() + self.count)
-
-    def merge(self, data: tuple):
+    def merge(self, data: tuple, place):
+        """Add a batch's replicate sums; ``place(pixels)``: their positions in the film's layout."""
         sq, mean_sum, mean_sq, count, covered = data
-        _add(self.sq, sq)
+        _add(self.sq, sq, place)
         self.mean_sum += mean_sum
         self.mean_sq += mean_sq
         self.count += count
         if covered is not None:
             if self.pixel_count is None:
                 self.pixel_count = np.zeros(len(self.sq), np.int32)
-            self.pixel_count[covered] += 1
+            self.pixel_count[place(covered)] += 1
 
 
 def batch_arrays(components: list[str], npix: int, splats: Splats, replicates: int, normalisers: dict) -> tuple:
@@ -159,34 +175,55 @@ class Film:
 
     A component's normaliser is a number (particles emitted, or samples through every pixel) or, once
     batches that cover part of the image were merged, a count per pixel (samples through that pixel).
+
+    The per-pixel arrays (``sums``, ``comp_rep_sq``, the groups' ``sq`` and ``pixel_count``, the
+    normalisers counted per pixel) run over the film's layout: the pixels sampled so far, in the order
+    first sampled, while the film is compact (``dense`` false; see the module's docstring), else every
+    pixel. The results (:meth:`rgb`, :meth:`variance_y`, ...) are whole images either way;
+    :meth:`make_dense` gives the arrays over every pixel.
     """
 
     def __init__(self, width: int, height: int, components: dict[str, str], groups: dict[str, str] | None = None):
         self.width, self.height = width, height
-        n = width * height
         self.kinds = dict(components)
         self.group_of = {name: (groups or {}).get(name, "") for name in components}
-        self.groups = {g: _Replicates(n) for g in dict.fromkeys(self.group_of.values())}
-        self.sums = {name: np.zeros((3, n)) for name in components}  # RGB, (3, pixels)
+        # the compact layout: 1 + the position of each pixel sampled so far (0: not yet), the pixel at
+        # each position, and how many positions are taken; _slot is None once the film is dense
+        self._slot: np.ndarray | None = np.zeros(self.pixels, np.int32)
+        self._pixel = np.zeros(0, np.int64)
+        self._used = 0
+        self.groups = {g: _Replicates(0) for g in dict.fromkeys(self.group_of.values())}
+        self.sums = {name: np.zeros((3, 0)) for name in components}  # RGB, (3, layout)
         self.norm: dict[str, int | np.ndarray] = dict.fromkeys(components, 0)  # the normaliser's total
-        self.comp_rep_sq = {name: np.zeros(n) for name in components}  # per component, for its own error
-        self._lum: dict[str, np.ndarray] = {}  # per component, its luminance (pixels,) until the next merge
+        self._floor = dict.fromkeys(components, 0)  # a per-pixel normaliser's value at pixels not yet sampled
+        self.comp_rep_sq = {name: np.zeros(0) for name in components}  # per component, for its own error
+        self._lum: dict[str, np.ndarray] = {}  # per component, its luminance (layout,) until the next merge
 
     @property
     def pixels(self) -> int:
         return self.width * self.height
 
     @property
+    def dense(self) -> bool:
+        """Whether the per-pixel arrays run over every pixel (else over the pixels sampled so far)."""
+        return self._slot is None
+
+    @property
     def replicates(self) -> int:
         """Replicates recorded, over every group (per pixel where batches cover part of the image: the
         fewest any pixel holds)."""
-        return sum(g.fewest() for g in self.groups.values())
+        return sum(self._fewest(g) for g in self.groups.values())
 
     @property
     def fewest_replicates(self) -> int:
         """The replicates of the group that has fewest (an error needs two in every group), per pixel where
         batches cover part of the image."""
-        return min((g.fewest() for g in self.groups.values()), default=0)
+        return min((self._fewest(g) for g in self.groups.values()), default=0)
+
+    def _fewest(self, rep: _Replicates) -> int:
+        if rep.pixel_count is None or self._size < self.pixels:  # pixels not yet sampled add none
+            return rep.count
+        return rep.count + int(rep.pixel_count.min())
 
     @property
     def partial_coverage(self) -> bool:
@@ -199,15 +236,113 @@ class Film:
         counts = [g.counts() for g in self.groups.values() if g.pixel_count is not None]
         if not counts:
             return None
-        return np.minimum.reduce([np.broadcast_to(c, (self.pixels,)) for c in counts]).reshape(self.height, self.width)
+        fewest = np.minimum.reduce([self._live(c) for c in counts])
+        floor = min(g.count for g in self.groups.values() if g.pixel_count is not None)  # pixels not yet sampled
+        return self._spread(fewest, floor).reshape(self.height, self.width)
+
+    def count_summary(self, name: str) -> tuple[float, int, int]:
+        """The mean, fewest and most of component ``name``'s normaliser over the pixels (per pixel where
+        batches covered part of the image)."""
+        n = self.norm[name]
+        if not isinstance(n, np.ndarray):
+            return float(n), int(n), int(n)
+        live, rest, floor = self._live(n), self.pixels - self._size, self._floor[name]
+        lows = ([int(live.min())] if live.size else []) + ([floor] if rest else [])
+        highs = ([int(live.max())] if live.size else []) + ([floor] if rest else [])
+        return (float(live.sum(dtype=np.int64)) + float(floor) * rest) / self.pixels, min(lows), max(highs)
 
     @property
     def rep_sq(self) -> np.ndarray:
-        """Per pixel, the sums over replicates of Y(m_r)^2, over every group."""
-        return sum((g.sq for g in self.groups.values()), start=np.zeros(self.pixels)) if len(self.groups) > 1 \
-            else next(iter(self.groups.values())).sq
+        """Per pixel of the layout, the sums over replicates of Y(m_r)^2, over every group."""
+        return sum((self._live(g.sq) for g in self.groups.values()), start=np.zeros(self._size)) \
+            if len(self.groups) > 1 else self._live(next(iter(self.groups.values())).sq)
 
-    # -- filling (one batch) ---------------------------------------------------------------------
+    # -- layout ------------------------------------------------------------------------------------
+    @property
+    def _size(self) -> int:
+        """Positions of the layout in use."""
+        return self.pixels if self._slot is None else self._used
+
+    def _live(self, a: np.ndarray) -> np.ndarray:
+        """The positions in use of a per-pixel array (its capacity beyond them holds the untouched value);
+        a number as it is."""
+        return a if self._slot is None or np.ndim(a) == 0 else a[..., :self._used]
+
+    def _spread(self, values: np.ndarray, fill=0) -> np.ndarray:
+        """Flat (pixels,) from ``values`` over the layout's positions in use, ``fill`` at pixels not yet
+        sampled."""
+        if self._slot is None:
+            return values
+        out = _filled((self.pixels,), fill, values.dtype)
+        out[self._pixel[:self._used]] = values
+        return out
+
+    def _each_array(self, remake):
+        """Replace every per-pixel array ``a`` by ``remake(a, fill)``, ``fill`` being its value at pixels
+        not yet sampled."""
+        for k in self.sums:
+            self.sums[k] = remake(self.sums[k], 0)
+            self.comp_rep_sq[k] = remake(self.comp_rep_sq[k], 0)
+            if isinstance(self.norm[k], np.ndarray):
+                self.norm[k] = remake(self.norm[k], self._floor[k])
+        for rep in self.groups.values():
+            rep.sq = remake(rep.sq, 0)
+            if rep.pixel_count is not None:
+                rep.pixel_count = remake(rep.pixel_count, 0)
+
+    def make_dense(self):
+        """Put the per-pixel arrays over every pixel (no number changes)."""
+        if self._slot is None:
+            return
+        used, at = self._used, self._pixel[:self._used]
+
+        def spread(a, fill):
+            out = _filled(a.shape[:-1] + (self.pixels,), fill, a.dtype)
+            out[..., at] = a[..., :used]
+            return out
+
+        self._each_array(spread)
+        self._slot, self._pixel, self._used = None, np.zeros(0, np.int64), 0
+        self._lum.clear()
+
+    def _take_positions(self, pixels: np.ndarray):
+        """Give the pixels not yet sampled among ``pixels`` positions in the layout (in the order given),
+        growing its arrays by half; the film turns dense when they pass :data:`COMPACT_SHARE` of the
+        retina."""
+        if self._slot is None or len(pixels) == 0:
+            return
+        new = pixels[self._slot[pixels] == 0]
+        if len(new) == 0:
+            return
+        _, first = np.unique(new, return_index=True)
+        new = new[np.sort(first)]  # each once, in the order given
+        used = self._used + len(new)
+        if used > COMPACT_SHARE * self.pixels:
+            self.make_dense()
+            return
+        capacity = len(self._pixel)
+        if used > capacity:
+            capacity = min(self.pixels, max(used, capacity + capacity // 2, 1024))
+
+            def grow(a, fill):
+                out = _filled(a.shape[:-1] + (capacity,), fill, a.dtype)
+                out[..., :a.shape[-1]] = a
+                return out
+
+            self._each_array(grow)
+            self._pixel = grow(self._pixel, 0)
+        self._pixel[self._used:used] = new
+        self._slot[new] = np.arange(self._used + 1, used + 1, dtype=np.int32)
+        self._used = used
+
+    def _at(self, pixels: np.ndarray) -> np.ndarray:
+        """The positions in the layout of ``pixels``, which have positions (:meth:`_take_positions`)."""
+        return pixels if self._slot is None else self._slot[pixels] - 1
+
+    @property
+    def _capacity(self) -> int:
+        return self.pixels if self._slot is None else len(self._pixel)
+
     # -- merging ---------------------------------------------------------------------------------
     def merge_arrays(self, data: tuple, prefix: str = "", group: str | None = None):
         """Add a batch's arrays (:func:`batch_arrays`); with ``prefix``,
@@ -215,52 +350,62 @@ class Film:
         group of this film (the hybrid method merges each channel's batch so)."""
         names, sums, norms, c_sq, groups = data
         self._lum.clear()
+        arrays = [*sums, *c_sq, *(rep[0] for rep in groups.values())]
+        if any(not isinstance(a, Columns) for a in arrays):  # a batch that lit most pixels travels whole
+            self.make_dense()
+        touched = [a.idx for a in arrays if isinstance(a, Columns)] + [n for n in norms if isinstance(n, np.ndarray)]
+        touched += [rep[4] for rep in groups.values() if rep[4] is not None]
+        if touched:
+            self._take_positions(np.concatenate(touched))
         for i, k in enumerate(names):
             k = prefix + k
-            _add(self.sums[k], sums[i])
+            _add(self.sums[k], sums[i], self._at)
             n = norms[i]
             if isinstance(n, np.ndarray):  # the pixels a batch sampled once each
                 if not isinstance(self.norm[k], np.ndarray):
-                    self.norm[k] = np.full(self.pixels, self.norm[k], np.int32)
-                self.norm[k][n] += 1
+                    self._floor[k] = self.norm[k]
+                    self.norm[k] = _filled((self._capacity,), self.norm[k], np.int32)
+                self.norm[k][self._at(n)] += 1
             else:
                 self.norm[k] += n
-            _add(self.comp_rep_sq[k], c_sq[i])
+                self._floor[k] += n
+            _add(self.comp_rep_sq[k], c_sq[i], self._at)
         for g, rep in groups.items():
-            self.groups[g if group is None else group].merge(rep)
+            self.groups[g if group is None else group].merge(rep, self._at)
 
     # -- results ---------------------------------------------------------------------------------
     def finite(self) -> bool:
         """Whether every sum is finite (then so are the image and its variance: the normalisers are
         counts of at least one)."""
         arrays = [*self.sums.values(), *self.comp_rep_sq.values(), *(g.sq for g in self.groups.values())]
-        return all(bool(np.isfinite(a).all()) for a in arrays)
+        return all(bool(np.isfinite(self._live(a)).all()) for a in arrays)
 
     def _divisor(self, name: str):
-        """What a component's sums are divided by: its normaliser, at least 1 (per pixel where batches
-        covered part of the image)."""
+        """What a component's sums are divided by: its normaliser, at least 1 (per position of the layout
+        where batches covered part of the image)."""
         n = self.norm[name]
-        return np.maximum(n, 1) if isinstance(n, np.ndarray) else max(n, 1)
+        return np.maximum(self._live(n), 1) if isinstance(n, np.ndarray) else max(n, 1)
 
     def rgb(self, group: str | None = None) -> np.ndarray:
         """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
         ``group`` only, when given)."""
         out = np.zeros((self.pixels, 3))
-        for name in self.kinds:
-            if group is None or self.group_of[name] == group:
-                n = self._divisor(name)
-                for c in range(3):  # a channel at a time: the same numbers as the whole (3, pixels) at once
-                    out[:, c] += self.sums[name][c] / n
+        names = [k for k in self.kinds if group is None or self.group_of[k] == group]
+        for c in range(3):  # a channel at a time: the same numbers as the whole (3, pixels) at once
+            acc = np.zeros(self._size)
+            for name in names:
+                acc += self._live(self.sums[name])[c] / self._divisor(name)
+            out[:, c] = self._spread(acc)
         return out.reshape(self.height, self.width, 3)
 
     def _y(self, names) -> np.ndarray:
-        """Flat (pixels,) luminance of the sum of the components ``names`` (each component's kept until
-        the next merge: the variances and the report ask for them again)."""
-        y = np.zeros(self.pixels)
+        """(layout,) luminance of the sum of the components ``names`` (each component's kept until the
+        next merge: the variances and the report ask for them again)."""
+        y = np.zeros(self._size)
         for k in names:
             if k not in self._lum:
                 # luminance3 of the divided sums, a channel at a time (the same terms)
-                n, s = self._divisor(k), self.sums[k]
+                n, s = self._divisor(k), self._live(self.sums[k])
                 lum = (s[0] / n) * Y_WEIGHTS[0]
                 lum += (s[1] / n) * Y_WEIGHTS[1]
                 lum += (s[2] / n) * Y_WEIGHTS[2]
@@ -269,11 +414,11 @@ class Film:
         return y
 
     def _variance(self, y: np.ndarray, sq: np.ndarray, r) -> np.ndarray:
-        """Per pixel, the variance of the mean of r replicates whose mean is y and whose squares sum to sq
-        (zero where fewer than two replicates exist)."""
+        """Per position of the layout, the variance of the mean of r replicates whose mean is y and whose
+        squares sum to sq (zero where fewer than two replicates exist)."""
         r = np.asarray(r)
         if r.ndim == 0 and r < 2:
-            return np.zeros((self.height, self.width))
+            return np.zeros(self._size)
         rr = np.maximum(r, 2)
         var = sq / rr  # in place from here: a 4K image's temporaries are 66 MB each
         var -= y * y
@@ -281,18 +426,22 @@ class Film:
         var /= rr - 1
         if r.ndim:
             var[r < 2] = 0.0
-        return var.reshape(self.height, self.width)
+        return var
+
+    def _group_variance(self, group: str | None) -> np.ndarray:
+        """(layout,) the sum of the groups' variances of the pixels' mean luminance (of ``group`` only)."""
+        out = np.zeros(self._size)
+        for g, rep in self.groups.items():
+            if group is None or g == group:
+                names = [k for k in self.kinds if self.group_of[k] == g]
+                out = out + self._variance(self._y(names), self._live(rep.sq), self._live(rep.counts()))
+        return out
 
     def variance_y(self, group: str | None = None) -> np.ndarray:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
         (zero where fewer than two replicates exist): the sum over the independent groups (of ``group``
         only, when given)."""
-        out = np.zeros((self.height, self.width))
-        for g, rep in self.groups.items():
-            if group is None or g == group:
-                names = [k for k in self.kinds if self.group_of[k] == g]
-                out = out + self._variance(self._y(names), rep.sq, rep.counts())
-        return out
+        return self._spread(self._group_variance(group)).reshape(self.height, self.width)
 
     def mean_standard_error(self, group: str | None = None) -> float:
         """Standard error (cd/m^2) of the image's mean luminance: from the spread of the replicates' image
@@ -304,7 +453,7 @@ class Film:
             if group is not None and g != group:
                 continue
             if rep.pixel_count is not None:
-                var += float(self.variance_y(g).sum()) / self.pixels**2
+                var += float(self._group_variance(g).sum()) / self.pixels**2
                 continue
             r = rep.count
             if r >= 2:
@@ -314,11 +463,13 @@ class Film:
 
     def component_y(self, name: str) -> np.ndarray:
         """(H, W) one component's luminance estimate, cd/m^2."""
-        return self._y([name]).reshape(self.height, self.width)
+        return self._spread(self._y([name])).reshape(self.height, self.width)
 
     def component_variance_y(self, name: str) -> np.ndarray:
+        """(H, W) the variance of one component's luminance estimate, (cd/m^2)^2."""
         rep = self.groups[self.group_of[name]]
-        return self._variance(self._y([name]), self.comp_rep_sq[name], rep.counts())
+        var = self._variance(self._y([name]), self._live(self.comp_rep_sq[name]), self._live(rep.counts()))
+        return self._spread(var).reshape(self.height, self.width)
 
 
 class Splats:

@@ -370,12 +370,12 @@ class BackwardTracer(Integrator, PathMethod):
 
     def finish(self, result):
         super().finish(result)
-        count = result.film.norm.get("hit", 0)
-        if isinstance(count, np.ndarray):  # batches smaller than the image: a count per pixel
-            result.extra["samples_per_pixel"] = float(count.mean())
-            result.extra["samples_per_pixel_range"] = [int(count.min()), int(count.max())]
+        mean, fewest, most = result.film.count_summary("hit")
+        if isinstance(result.film.norm["hit"], np.ndarray):  # batches smaller than the image: a count per pixel
+            result.extra["samples_per_pixel"] = mean
+            result.extra["samples_per_pixel_range"] = [fewest, most]
         else:
-            result.extra["samples_per_pixel"] = count
+            result.extra["samples_per_pixel"] = fewest
         result.extra["next_event"] = self.next_event
         film = result.film
         total = sum(float(luminance3(film.sums[c]).sum()) for c in self.components)

@@ -356,7 +356,7 @@ class Integrator:
             return
         film = result.film
         npix = film.width * film.height
-        counts = {c: float(np.mean(film.norm.get(c, 0))) for c in sums}  # per pixel where batches covered part
+        counts = {c: film.count_summary(c)[0] if c in film.norm else 0.0 for c in sums}  # the mean per pixel
         missing = sum(v / counts[c] for c, v in sums.items() if counts[c] > 0) / npix
         mean = float(luminance(film.rgb()).mean())
         se = film.mean_standard_error()

@@ -30,7 +30,7 @@ def components_report(result: RenderResult) -> dict:
         y = film.component_y(name)
         var = film.component_variance_y(name)
         count = film.norm[name]
-        count = float(count.mean()) if isinstance(count, np.ndarray) else count  # per pixel: the mean
+        count = film.count_summary(name)[0] if isinstance(count, np.ndarray) else count  # per pixel: the mean
         out[name] = {"normalised_by": kind, "count": count, "mean_cd_m2": float(y.mean()),
                      "standard_error_cd_m2": float(math.sqrt(var.sum()) / y.size),
                      "share": float(y.sum()) / total if total > 0 else 0.0}
