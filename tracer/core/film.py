@@ -74,6 +74,15 @@ def _add(total: np.ndarray, a, place) -> None:
         total += a
 
 
+def summarise_counts(per_position: np.ndarray, outside: int, pixels: int) -> tuple[float, int, int]:
+    """The mean, fewest and most of a count per pixel of a film's layout, ``per_position`` (layout,),
+    that is ``outside`` at the other of the ``pixels`` pixels."""
+    rest = pixels - len(per_position)
+    lows = ([int(per_position.min())] if per_position.size else []) + ([outside] if rest else [])
+    highs = ([int(per_position.max())] if per_position.size else []) + ([outside] if rest else [])
+    return (float(per_position.sum(dtype=np.int64)) + float(outside) * rest) / pixels, min(lows), max(highs)
+
+
 def _filled(shape: tuple, fill, dtype) -> np.ndarray:
     """An array of ``fill`` (zeros left to the kernel: pages nobody writes cost no memory)."""
     return np.zeros(shape, dtype) if fill == 0 else np.full(shape, fill, dtype)
@@ -230,15 +239,24 @@ class Film:
         """Whether some group's batches covered part of the image (its counts are per pixel)."""
         return any(g.pixel_count is not None for g in self.groups.values())
 
+    def layout_sample_counts(self) -> tuple[np.ndarray, int] | None:
+        """Where batches covered part of the image: per position of the layout (layout,) the fewest
+        samples any group took through that pixel, and that number at the pixels outside the layout;
+        else None (every pixel had the same)."""
+        partial = [g for g in self.groups.values() if g.pixel_count is not None]
+        if not partial:
+            return None
+        return np.minimum.reduce([self._live(g.counts()) for g in partial]), min(g.count for g in partial)
+
     def sample_counts(self) -> np.ndarray | None:
         """(H, W) the fewest samples any group took through each pixel where batches covered part of the
         image, else None (every pixel had the same)."""
-        counts = [g.counts() for g in self.groups.values() if g.pixel_count is not None]
-        if not counts:
-            return None
-        fewest = np.minimum.reduce([self._live(c) for c in counts])
-        floor = min(g.count for g in self.groups.values() if g.pixel_count is not None)  # pixels not yet sampled
-        return self._spread(fewest, floor).reshape(self.height, self.width)
+        found = self.layout_sample_counts()
+        return None if found is None else self.to_pixels(*found).reshape(self.height, self.width)
+
+    def layout_pixels(self) -> np.ndarray:
+        """(layout,) the flat pixel at each position of the layout."""
+        return np.arange(self.pixels) if self._slot is None else self._pixel[:self._used]
 
     def count_summary(self, name: str) -> tuple[float, int, int]:
         """The mean, fewest and most of component ``name``'s normaliser over the pixels (per pixel where
@@ -246,10 +264,7 @@ class Film:
         n = self.norm[name]
         if not isinstance(n, np.ndarray):
             return float(n), int(n), int(n)
-        live, rest, floor = self._live(n), self.pixels - self._size, self._floor[name]
-        lows = ([int(live.min())] if live.size else []) + ([floor] if rest else [])
-        highs = ([int(live.max())] if live.size else []) + ([floor] if rest else [])
-        return (float(live.sum(dtype=np.int64)) + float(floor) * rest) / self.pixels, min(lows), max(highs)
+        return summarise_counts(self._live(n), self._floor[name], self.pixels)
 
     @property
     def rep_sq(self) -> np.ndarray:
@@ -268,14 +283,18 @@ class Film:
         a number as it is."""
         return a if self._slot is None or np.ndim(a) == 0 else a[..., :self._used]
 
-    def _spread(self, values: np.ndarray, fill=0) -> np.ndarray:
-        """Flat (pixels,) from ``values`` over the layout's positions in use, ``fill`` at pixels not yet
-        sampled."""
+    def to_pixels(self, values: np.ndarray, fill=0) -> np.ndarray:
+        """(..., pixels) flat, from ``values`` (..., layout) over the layout's positions in use, ``fill``
+        at pixels not yet sampled."""
         if self._slot is None:
             return values
-        out = _filled((self.pixels,), fill, values.dtype)
-        out[self._pixel[:self._used]] = values
+        out = _filled(values.shape[:-1] + (self.pixels,), fill, values.dtype)
+        out[..., self._pixel[:self._used]] = values
         return out
+
+    def positions(self, pixels: np.ndarray) -> np.ndarray:
+        """The positions in the layout of flat ``pixels`` that were sampled (each has one)."""
+        return self._at(pixels)
 
     def _each_array(self, remake):
         """Replace every per-pixel array ``a`` by ``remake(a, fill)``, ``fill`` being its value at pixels
@@ -386,17 +405,21 @@ class Film:
         n = self.norm[name]
         return np.maximum(self._live(n), 1) if isinstance(n, np.ndarray) else max(n, 1)
 
+    def layout_rgb(self, group: str | None = None) -> np.ndarray:
+        """(3, layout) mean apparent luminance, linear Rec.709, cd/m^2, at the layout's positions: the
+        sum of the components (of ``group`` only, when given)."""
+        out = np.zeros((3, self._size))
+        for name in self.kinds:
+            if group is None or self.group_of[name] == group:
+                n = self._divisor(name)
+                for c in range(3):  # a channel at a time: the same numbers as the whole (3, layout) at once
+                    out[c] += self._live(self.sums[name])[c] / n
+        return out
+
     def rgb(self, group: str | None = None) -> np.ndarray:
         """(H, W, 3) mean apparent luminance, linear Rec.709, cd/m^2: the sum of the components (of
         ``group`` only, when given)."""
-        out = np.zeros((self.pixels, 3))
-        names = [k for k in self.kinds if group is None or self.group_of[k] == group]
-        for c in range(3):  # a channel at a time: the same numbers as the whole (3, pixels) at once
-            acc = np.zeros(self._size)
-            for name in names:
-                acc += self._live(self.sums[name])[c] / self._divisor(name)
-            out[:, c] = self._spread(acc)
-        return out.reshape(self.height, self.width, 3)
+        return np.ascontiguousarray(self.to_pixels(self.layout_rgb(group)).T).reshape(self.height, self.width, 3)
 
     def _y(self, names) -> np.ndarray:
         """(layout,) luminance of the sum of the components ``names`` (each component's kept until the
@@ -428,7 +451,7 @@ class Film:
             var[r < 2] = 0.0
         return var
 
-    def _group_variance(self, group: str | None) -> np.ndarray:
+    def layout_variance_y(self, group: str | None = None) -> np.ndarray:
         """(layout,) the sum of the groups' variances of the pixels' mean luminance (of ``group`` only)."""
         out = np.zeros(self._size)
         for g, rep in self.groups.items():
@@ -441,7 +464,7 @@ class Film:
         """(H, W) variance of each pixel's mean luminance from the spread of the replicates, (cd/m^2)^2
         (zero where fewer than two replicates exist): the sum over the independent groups (of ``group``
         only, when given)."""
-        return self._spread(self._group_variance(group)).reshape(self.height, self.width)
+        return self.to_pixels(self.layout_variance_y(group)).reshape(self.height, self.width)
 
     def mean_standard_error(self, group: str | None = None) -> float:
         """Standard error (cd/m^2) of the image's mean luminance: from the spread of the replicates' image
@@ -453,7 +476,7 @@ class Film:
             if group is not None and g != group:
                 continue
             if rep.pixel_count is not None:
-                var += float(self._group_variance(g).sum()) / self.pixels**2
+                var += float(self.layout_variance_y(g).sum()) / self.pixels**2
                 continue
             r = rep.count
             if r >= 2:
@@ -461,15 +484,13 @@ class Film:
                 var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
         return float(np.sqrt(var))
 
-    def component_y(self, name: str) -> np.ndarray:
-        """(H, W) one component's luminance estimate, cd/m^2."""
-        return self._spread(self._y([name])).reshape(self.height, self.width)
-
-    def component_variance_y(self, name: str) -> np.ndarray:
-        """(H, W) the variance of one component's luminance estimate, (cd/m^2)^2."""
+    def component_totals(self, name: str) -> tuple[float, float]:
+        """One component's luminance, cd/m^2, and that luminance's variance, (cd/m^2)^2, each summed over
+        the pixels."""
         rep = self.groups[self.group_of[name]]
-        var = self._variance(self._y([name]), self._live(self.comp_rep_sq[name]), self._live(rep.counts()))
-        return self._spread(var).reshape(self.height, self.width)
+        y = self._y([name])
+        var = self._variance(y, self._live(self.comp_rep_sq[name]), self._live(rep.counts()))
+        return float(y.sum()), float(var.sum())
 
 
 class Splats:

@@ -15,6 +15,7 @@ import contextlib
 import numbers
 import os
 import sys
+import threading
 import uuid
 from pathlib import Path
 
@@ -81,38 +82,54 @@ def srgb_encode(v) -> np.ndarray:
     return out
 
 
+_silence_lock = threading.Lock()
+_silence_depth = 0
+_silence_saved: int | None = None
+
+
 @contextlib.contextmanager
 def _c_stderr_silenced():
     """Send what C libraries write to file descriptor 2 while the block runs to /dev/null: libpng
-    prints its errors there, beside the error text OpenImageIO returns (which the caller reports)."""
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError):  # no file descriptor 2 (an embedding host): nothing to silence
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 2)
+    prints its errors there, beside the error text OpenImageIO returns (which the caller reports).
+    Blocks may overlap in several threads (a render's outputs are checked side by side): the first
+    to enter silences, the last to leave restores."""
+    global _silence_depth, _silence_saved
+    with _silence_lock:
+        if _silence_depth == 0:
+            try:
+                sys.stderr.flush()
+                _silence_saved = os.dup(2)
+            except (OSError, ValueError):  # no file descriptor 2 (an embedding host): nothing to silence
+                _silence_saved = None
+            if _silence_saved is not None:
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, 2)
+                os.close(devnull)
+        _silence_depth += 1
     try:
         yield
     finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
+        with _silence_lock:
+            _silence_depth -= 1
+            if _silence_depth == 0 and _silence_saved is not None:
+                os.dup2(_silence_saved, 2)
+                os.close(_silence_saved)
+                _silence_saved = None
 
 
-def _read_pixels(path) -> tuple[oiio.ImageSpec, np.ndarray]:
-    """Read the first subimage of ``path`` as stored, as float32 of shape (H, W, C).
+def _read_pixels(path, kind=oiio.FLOAT) -> tuple[oiio.ImageSpec, np.ndarray]:
+    """Read the first subimage of ``path`` as stored, as float32 of shape (H, W, C) (``kind``
+    ``oiio.UINT8``: as 8-bit codes, uint8).
 
     Colour is not multiplied by alpha (the ``oiio:UnassociatedAlpha`` reader hint). Raises
     :class:`ImageReadError` with OpenImageIO's error text on failure; what the format's C library
     prints on the way is kept off the terminal (a truncated PNG made libpng print two more lines).
     """
     with _c_stderr_silenced():
-        return _read_pixels_as_stored(path)
+        return _read_pixels_as_stored(path, kind)
 
 
-def _read_pixels_as_stored(path) -> tuple[oiio.ImageSpec, np.ndarray]:
+def _read_pixels_as_stored(path, kind) -> tuple[oiio.ImageSpec, np.ndarray]:
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)
@@ -120,13 +137,19 @@ def _read_pixels_as_stored(path) -> tuple[oiio.ImageSpec, np.ndarray]:
         raise ImageReadError(path, oiio.geterror() or "cannot open the file")
     try:
         spec = inp.spec()
-        pixels = inp.read_image(oiio.FLOAT)
+        pixels = inp.read_image(kind)
         if pixels is None:
             raise ImageReadError(path, inp.geterror() or "cannot read the pixels")
     finally:
         inp.close()
-    pixels = np.asarray(pixels, dtype=np.float32)
+    pixels = np.asarray(pixels, dtype=np.uint8 if kind == oiio.UINT8 else np.float32)
     return spec, pixels.reshape(spec.height, spec.width, spec.nchannels)
+
+
+def read_codes(path) -> np.ndarray:
+    """The pixels of an 8-bit image file (a PNG) as its stored codes, (H, W, C) uint8, row 0 the top
+    row: what :func:`write_png` wrote, without decoding. Raises :class:`ImageReadError`."""
+    return _read_pixels(path, oiio.UINT8)[1]
 
 
 def read_image(path, linear: bool | None = None) -> np.ndarray:
@@ -219,6 +242,15 @@ def write_exr(path, channels: dict[str, np.ndarray], attributes: dict | None = N
         raise ValueError(
             f"channels must be 2-D arrays of one shape, got {[p.shape for p in planes]}"
         )
+    write_exr_pixels(path, names, np.stack(planes, axis=-1), attributes)
+
+
+def write_exr_pixels(path, names: list[str], pixels: np.ndarray, attributes: dict | None = None) -> None:
+    """:func:`write_exr` of channels given interleaved: ``pixels`` (H, W, len(names)) float32, channel
+    k named ``names[k]`` (a 4K image built so skips the copy that interleaves its planes)."""
+    if pixels.ndim != 3 or pixels.shape[2] != len(names) or pixels.dtype != np.float32:
+        raise ValueError(f"pixels must be (H, W, {len(names)}) float32, got {pixels.dtype} {pixels.shape}")
+    shape = pixels.shape[:2]
     spec = oiio.ImageSpec(shape[1], shape[0], len(names), oiio.FLOAT)
     spec.channelnames = tuple(names)
     for key, value in (attributes or {}).items():
@@ -238,7 +270,7 @@ def write_exr(path, channels: dict[str, np.ndarray], attributes: dict | None = N
                 f"attribute {key!r} must be str, int or float, got {type(value).__name__}"
             )
     spec.attribute("compression", "zip")
-    _write_atomically(path, "openexr", spec, np.stack(planes, axis=-1))
+    _write_atomically(path, "openexr", spec, np.ascontiguousarray(pixels))
 
 
 def read_exr_channels(path) -> tuple[dict[str, np.ndarray], dict]:
@@ -267,6 +299,27 @@ def read_exr_channels(path) -> tuple[dict[str, np.ndarray], dict]:
     channels = {name: pixels[..., i].copy() for i, name in enumerate(spec.channelnames)}
     attributes = {a.name: a.value for a in spec.extra_attribs}
     return channels, attributes
+
+
+def read_exr_rows(path, ybegin: int, yend: int) -> tuple[dict[str, np.ndarray], dict]:
+    """Rows ``ybegin`` to ``yend`` (exclusive) of every channel of an image file by name, float32
+    (rows, W) views, with its header metadata (:func:`read_exr_channels` of part of the image: only the
+    blocks that hold those rows are read and decoded). Raises :class:`ImageReadError`, for instance
+    where the file ends before those rows."""
+    with _c_stderr_silenced():
+        inp = oiio.ImageInput.open(str(path))
+        if inp is None:
+            raise ImageReadError(path, oiio.geterror() or "cannot open the file")
+        try:
+            spec = inp.spec()
+            rows = inp.read_scanlines(ybegin, yend, 0, 0, spec.nchannels, oiio.FLOAT)
+            if rows is None:
+                raise ImageReadError(path, inp.geterror() or f"cannot read rows {ybegin} to {yend}")
+        finally:
+            inp.close()
+    rows = np.asarray(rows, dtype=np.float32).reshape(yend - ybegin, spec.width, spec.nchannels)
+    return ({name: rows[..., i] for i, name in enumerate(spec.channelnames)},
+            {a.name: a.value for a in spec.extra_attribs})
 
 
 def write_png(path, rgb8: np.ndarray) -> None:

@@ -8,9 +8,10 @@ a set:
   files) and locked, so that a second render into the same folder is refused instead of mixing its
   files with this one's. A folder that cannot take the outputs raises :class:`OutputFolderError`
   before any work is done.
-- :meth:`OutputSet.commit`, after the render: every file is written into a hidden staging folder
-  inside the target, read back and checked by its own check (the EXR's pixels equal to what was
-  meant, the JSON parses), and only then moved into place, one rename each; should a rename fail,
+- :meth:`OutputSet.commit` (or :meth:`OutputSet.staging`, file by file as each is ready), after the
+  render: every file is written into a hidden staging folder inside the target, read back and checked
+  by its own check (the EXR's header and its first and last rows equal to what was meant, the PNG's
+  pixels, the JSON parses), and only then moved into place, one rename each; should a rename fail,
   the files already moved are put back. Any failure leaves the older set as it was and raises
   :class:`OutputWriteError` (a full disk, for instance, which OpenEXR does not always report: the
   read-back finds the short file).
@@ -27,13 +28,14 @@ import os
 import shutil
 import uuid
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import TracerError, one_line, printable
-from ..core.imageio import read_image, write_png
+from ..core.imageio import read_codes, write_png
 
 try:
     import fcntl
@@ -79,6 +81,20 @@ class OutputFile:
     name: str
     write: Callable[[Path], None]
     check: Callable[[Path], None]
+
+
+def _write_and_check(f: OutputFile, path: Path) -> tuple[str | None, Exception | None]:
+    """Write ``f`` at ``path`` and read it back: ("write", the OSError) if writing failed, ("check",
+    the exception) if the read-back did, else (None, None)."""
+    try:
+        f.write(path)
+    except OSError as e:
+        return "write", e
+    try:
+        f.check(path)
+    except Exception as e:  # noqa: BLE001 - any failure of the read-back means a bad file
+        return "check", e
+    return None, None
 
 
 class OutputSet:
@@ -198,29 +214,14 @@ class OutputSet:
     # -- after the render ------------------------------------------------------------------------
     def commit(self, files: list[OutputFile]):
         """Write, check and move ``files`` into the folder as one set (see the module docstring)."""
-        if sorted(f.name for f in files) != sorted(self.names):
-            raise ValueError(f"an output set is {self.names}, got {[f.name for f in files]}")
-        global _writing
-        staging = self.folder / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
-        _writing = True
-        try:
-            try:
-                staging.mkdir()
-                for f in files:
-                    f.write(staging / f.name)
-            except OSError as e:
-                raise OutputWriteError(self.folder, f"writing the outputs failed ({e}); the earlier outputs are "
-                                                    "kept") from None
+        with self.staging() as stage:
             for f in files:
-                try:
-                    f.check(staging / f.name)
-                except Exception as e:  # noqa: BLE001 - any failure of the read-back means a bad file
-                    raise OutputWriteError(self.folder / f.name, f"the written file does not read back ({e}); "
-                                           "the disk may be full; the earlier outputs are kept") from None
-            self._swap(staging, [f.name for f in files])
-        finally:
-            shutil.rmtree(staging, ignore_errors=True)
-            _writing = False
+                stage.add(f)
+            stage.finish()
+
+    def staging(self) -> Staging:
+        """A set written file by file as each is ready (:class:`Staging`); :meth:`commit` at once."""
+        return Staging(self)
 
     def _swap(self, staging: Path, names: list[str]):
         """Move the staged files onto the targets; on failure put back what was there."""
@@ -281,6 +282,60 @@ class OutputSet:
         self.close()
 
 
+class Staging:
+    """A set of files being written (:meth:`OutputSet.staging`): each file :meth:`add` is given is
+    written into a hidden staging folder inside the target and read back in a thread of its own at
+    once (the image libraries and numpy let go of the interpreter, so a 4K render's EXR is written
+    while its preview and report are still computed, and a set takes the time of its largest file);
+    :meth:`finish` waits for them, raises :class:`OutputWriteError` for the first that failed, and
+    moves the whole set into place. Leaving the ``with`` block waits for writes still running and
+    removes the staging folder: a set that did not finish leaves nothing behind."""
+
+    def __init__(self, outputs: OutputSet):
+        global _writing
+        self.outputs = outputs
+        self.folder = outputs.folder / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
+        try:
+            self.folder.mkdir()
+        except OSError as e:
+            raise OutputWriteError(outputs.folder, f"writing the outputs failed ({e}); the earlier outputs are "
+                                                   "kept") from None
+        _writing = True
+        self._pool = ThreadPoolExecutor(max_workers=len(outputs.names))
+        self._added: list[tuple[OutputFile, Future]] = []
+
+    def add(self, f: OutputFile):
+        """Start writing and reading back ``f``, one of the set's names not yet added."""
+        if f.name not in self.outputs.names or f.name in (g.name for g, _ in self._added):
+            raise ValueError(f"an output set is {self.outputs.names}; {f.name!r} is not one of them or was added")
+        self._added.append((f, self._pool.submit(_write_and_check, f, self.folder / f.name)))
+
+    def finish(self):
+        """Wait for every file, then move the set into place (:class:`OutputWriteError` if one failed)."""
+        names = [f.name for f, _ in self._added]
+        if sorted(names) != sorted(self.outputs.names):
+            raise ValueError(f"an output set is {self.outputs.names}, got {names}")
+        outcomes = [(f, future.result()) for f, future in self._added]
+        for _, (stage, e) in outcomes:
+            if stage == "write":
+                raise OutputWriteError(self.outputs.folder, f"writing the outputs failed ({e}); the earlier outputs "
+                                                            "are kept")
+        for f, (stage, e) in outcomes:
+            if stage == "check":
+                raise OutputWriteError(self.outputs.folder / f.name, f"the written file does not read back ({e}); "
+                                       "the disk may be full; the earlier outputs are kept")
+        self.outputs._swap(self.folder, names)
+
+    def __enter__(self) -> Staging:
+        return self
+
+    def __exit__(self, *exc):
+        global _writing
+        self._pool.shutdown(wait=True)
+        shutil.rmtree(self.folder, ignore_errors=True)
+        _writing = False
+
+
 def replace_folder(staging: Path, target: Path) -> Path | None:
     """Put the complete folder ``staging`` in the place of ``target`` (absent, empty, or an earlier
     set of files), the folder-level counterpart of :meth:`OutputSet.commit` (``hud-trace export``
@@ -323,7 +378,7 @@ def write_as_set(path, write, check) -> None:
 def png_file(name: str, rgb: np.ndarray) -> OutputFile:
     """An 8-bit PNG of ``rgb`` as a file of a set, checked by reading its pixels back."""
     def check(p):
-        back = np.rint(read_image(p, linear=True) * 255.0).astype(np.uint8)
+        back = read_codes(p)
         if back.shape != rgb.shape or not np.array_equal(back, rgb):
             raise ValueError("the pixels read back differ from those written")
 

@@ -12,10 +12,10 @@ as one set, each read back before it replaces its older version: tracer.products
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 import uuid
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +26,8 @@ from ..analysis.hud import hud_figures
 from ..analysis.optics import check_requirements, optics_block
 from ..analysis.sections import find_sections
 from ..core.errors import EstimateOverflowError, StoppedBeforeFirstBatch
-from ..core.imageio import read_exr_channels, read_image, write_exr
-from ..core.units import luminance
+from ..core.imageio import read_exr_rows, read_image, write_exr_pixels
+from ..core.units import luminance, luminance3
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..methods.base import MIN_REPLICATES
 from ..optics.pupil import pupil_diameter_mm
@@ -36,24 +36,34 @@ from ..scene import Scene, load_scene
 from ..scene.binocular import eye_for
 from ..transport.eye import ThinLensEye
 from ..transport.world import World
+from .fill import ImageFill
 from .optics import clean
 from .outputs import OutputFile, OutputSet, png_file, write_as_set
 from .report import build_report, finite_json
-from .tonemap import adaptation_luminance, tonemap_ward
+from .tonemap import (
+    DISPLAY_MAX_LUMINANCE,
+    adaptation_luminance,
+    check_preview_input,
+    log_average_luminance,
+    ward_codes,
+    ward_info,
+)
 
 #: The files of a render, written as a set (tracer.products.outputs).
 OUTPUT_NAMES = ("image.exr", "preview.png", "report.json")
 
 
-def _finite_planes(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The channels as float32 planes; :class:`EstimateOverflowError` if one holds NaN or Inf so."""
-    planes = {k: np.asarray(v, dtype=np.float32) for k, v in channels.items()}
-    for name, c32 in planes.items():
-        if not np.all(np.isfinite(c32)):
-            biggest = float(np.nanmax(np.abs(np.asarray(channels[name], dtype=np.float64))))
-            raise EstimateOverflowError(f"image.exr: channel {name} does not fit in float32 (largest |value| "
-                                        f"{biggest:.3g}): the scene's luminances or fluxes are too large")
-    return planes
+def _float32(values: np.ndarray, channels: list[str]) -> np.ndarray:
+    """``values`` (n,) or (n, len(channels)) as float32; :class:`EstimateOverflowError` naming the
+    first EXR channel (a column) that does not fit."""
+    out = values.astype(np.float32)
+    bad = ~np.isfinite(out.reshape(len(out), len(channels)))
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=0)))
+        biggest = float(np.abs(values.reshape(len(out), len(channels))[:, k]).max())
+        raise EstimateOverflowError(f"image.exr: channel {channels[k]} does not fit in float32 (largest |value| "
+                                    f"{biggest:.3g}): the scene's luminances or fluxes are too large")
+    return out
 
 
 def report_file(report: dict) -> OutputFile:
@@ -67,21 +77,29 @@ def report_file(report: dict) -> OutputFile:
     return OutputFile("report.json", lambda p: Path(p).write_text(text), check)
 
 
-def output_files(channels: dict[str, np.ndarray], attrs: dict, preview: np.ndarray, report: dict) -> list[OutputFile]:
-    """The render's three files, each with its read-back check (the EXR's and the preview's pixels
-    compared with those written)."""
-    planes = _finite_planes(channels)
-    report_out = report_file(report)  # its JSON checked before any file is written
+#: Rows read back at each end of image.exr to check it (OpenEXR's ZIP blocks hold 16 rows).
+CHECKED_ROWS = 16
 
-    def check_exr(path):
-        got, got_attrs = read_exr_channels(path)
-        if set(got) != set(planes) or any(not np.array_equal(got[k], planes[k]) for k in planes):
-            raise ValueError("the pixels read back differ from those written")
+
+def exr_file(names: list[str], pixels: np.ndarray, attrs: dict) -> OutputFile:
+    """image.exr (channels ``names`` of the interleaved float32 ``pixels`` (H, W, C), header
+    ``attrs``) as a file of a set, checked by reading back its header (the run id) and its first and
+    last :data:`CHECKED_ROWS` rows, compared with those meant. A read-back right after writing comes
+    from the system's cache, not the disk: what it can find is a file the writer left short (a full
+    disk, which OpenEXR does not always report) or unreadable, and the last rows find that; decoding
+    the whole of a 4K image again would take longer than writing it."""
+    h = pixels.shape[0]
+
+    def check(path):
+        for a, b in ((0, min(h, CHECKED_ROWS)), (max(0, h - CHECKED_ROWS), h)):
+            got, got_attrs = read_exr_rows(path, a, b)
+            if set(got) != set(names) or any(not np.array_equal(got[k], pixels[a:b, :, i])
+                                             for i, k in enumerate(names)):
+                raise ValueError(f"the pixels of rows {a} to {b} read back differ from those written")
         if got_attrs.get("hud:run_id") != attrs["hud:run_id"]:
             raise ValueError("the header read back differs from the one written")
 
-    return [OutputFile("image.exr", lambda p: write_exr(p, planes, attrs), check_exr),
-            png_file("preview.png", preview), report_out]
+    return OutputFile("image.exr", lambda p: write_exr_pixels(p, names, pixels, attrs), check)
 
 
 #: Share of the budget of the pilot render that finds the adaptation luminance a pupil follows.
@@ -157,100 +175,119 @@ def run_render(integrator, budget: Budget, workers: int = 1, progress=None, shou
     return integrator, result
 
 
-@dataclass
 class Products:
     """What a render gives its user, the same from the command line and from Blender: the image
-    (H, W, 3) cd/m^2 linear Rec.709, Y and its variance (H, W), the preview (sRGB uint8, Ward 1994),
-    the report (:func:`build_report`, with ``run_id``), the EXR's channels and header attributes
-    (``hud:*``). ``files()`` are the command line's three output files."""
+    (H, W, 3) float32 cd/m^2 linear Rec.709, its luminance ``y`` and that luminance's variance
+    ``var_y`` (H, W) float64 (made when first asked for: the analysis and Blender ask, the files do
+    not), the preview (sRGB uint8, Ward 1994), the report (:func:`build_report`, with ``run_id``), the
+    EXR's channels ``names`` interleaved in ``pixels`` (H, W, C) float32 (``channels``: each by name,
+    a view) and its header attributes (``hud:*``). ``files()`` are the command line's three output
+    files."""
 
-    image: np.ndarray
-    y: np.ndarray
-    var_y: np.ndarray
-    preview: np.ndarray
-    report: dict
-    channels: dict
-    attrs: dict
+    def __init__(self, fill: ImageFill, names: list[str], pixels: np.ndarray, preview: np.ndarray, report: dict,
+                 attrs: dict):
+        self.fill, self.names, self.pixels, self.preview, self.report = fill, names, pixels, preview, report
+        self.attrs = attrs
+        self.image = pixels[..., :3]
+        self.channels = {name: pixels[..., k] for k, name in enumerate(names)}  # views, (H, W) each
+
+    @functools.cached_property
+    def y(self) -> np.ndarray:
+        return self.group_y(None)
+
+    @functools.cached_property
+    def var_y(self) -> np.ndarray:
+        return self.fill.as_film(self.fill.film.layout_variance_y())
+
+    def group_y(self, group: str | None) -> np.ndarray:
+        """(H, W) float64 luminance, cd/m^2, of the image (of one channel: a film group)."""
+        return self.fill.image(luminance3(self.fill.film.layout_rgb(group)))
 
     def files(self) -> list[OutputFile]:
-        return output_files(self.channels, self.attrs, self.preview, self.report)
+        return [exr_file(self.names, self.pixels, self.attrs), png_file("preview.png", self.preview),
+                report_file(self.report)]
 
 
-def _nearest(known: np.ndarray) -> np.ndarray:
-    """For each position along the last axis of ``known`` (..., n), the index of the nearest known one
-    along that axis (the left one on a tie; n where the line has none)."""
-    n = known.shape[-1]
-    at = np.arange(n, dtype=np.int32)
-    left = np.where(known, at, np.int32(-1))
-    np.maximum.accumulate(left, axis=-1, out=left)
-    right = np.where(known, at, np.int32(n))[..., ::-1]
-    np.minimum.accumulate(right, axis=-1, out=right)
-    right = right[..., ::-1]
-    use_right = (left < 0) | ((right < n) & (at - left > right - at))
-    left[use_right] = right[use_right]
-    return left
+def _median_relative_error(y: np.ndarray, var_y: np.ndarray, film) -> float | None:
+    """The median relative standard error of the lit pixels that hold the two samples an error needs,
+    from per-position luminance ``y`` and variance ``var_y`` (layout,) of ``film`` (a filled pixel is
+    unmeasured); None where no pixel is lit and measured."""
+    lit = y > 1e-6 * max(float(y.max(initial=0.0)), 1e-300)
+    found = film.layout_sample_counts()
+    if found is not None:
+        lit &= found[0] >= MIN_REPLICATES
+    elif film.fewest_replicates < MIN_REPLICATES:
+        return None
+    return float(np.median(np.sqrt(var_y[lit]) / y[lit])) if lit.any() else None
 
 
-def fill_unsampled(image: np.ndarray, missing: np.ndarray) -> int:
-    """Give the pixels ``missing`` (H, W) of ``image`` (H, W, 3), which no sample reached (a render that
-    stopped before one sample per pixel), the value of the nearest sampled pixel of their row, or of the
-    nearest row that has one (their Y_var stays 0: unmeasured). Returns how many were missing."""
-    count = int(missing.sum())
-    if count == 0 or count == missing.size:
-        return count
-    h, w = missing.shape
-    known = ~missing
-    col = _nearest(known)  # (H, W): in each row, the nearest sampled column (w where the row has none)
-    row = _nearest(known.any(axis=1))  # (H,): the nearest row that has a sampled pixel
-    flat = image.reshape(-1, image.shape[-1])
-    for y in range(h):  # a row at a time: every pixel's source, itself where sampled
-        flat[y * w:(y + 1) * w] = flat[row[y] * w + col[row[y]]]
-    return count
-
-
-def render_products(world: World, integrator, result: RenderResult, budget: Budget, analyse: bool = True) -> Products:
+def render_products(world: World, integrator, result: RenderResult, budget: Budget, analyse: bool = True,
+                    stage=None) -> Products:
     """The image, report and EXR contents of a finished render (see :class:`Products`), with the
     analysis (:func:`add_analysis`) unless ``analyse`` is false. An image made of channels (the hybrid
     method: film groups) also gets each channel as EXR layer ``<channel>.R, .G, .B, .Y, .Y_var``.
     Pixels that no sample reached (a render stopped before one sample per pixel) show their nearest
-    sampled neighbour's value (:func:`fill_unsampled`); the report's ``image.samples_per_pixel`` says
-    how many."""
-    scene = world.scene
-    film = result.film
-    image = film.rgb()
-    var_y = film.variance_y()
-    counts = film.sample_counts()
-    unsampled = fill_unsampled(image, counts == 0) if counts is not None else 0
-    y = luminance(image)
-    mode = world.eye.spec.adaptation
-    preview, info = tonemap_ward(image, adaptation_luminance(y, mode))
-    info["adaptation_mode"] = mode
-    channels_y = {g: luminance(film.rgb(g)) for g in film.groups if g}
-    report = build_report(scene, result, image, var_y, info, budget, None, integrator.efficiency_definition)
-    report["polarisation"] = world.polarisation_report()
-    report["hud"] = report["optics"] = None
+    sampled neighbour's value (tracer.products.fill); the report's ``image.samples_per_pixel`` says
+    how many. Every per-pixel figure is computed once per position of the film's layout (the pixels
+    sampled, while few are: tracer.core.film) and then spread over the image, so that a large retina
+    stopped early costs by its samples; the numbers are those of computing them pixel by pixel.
+    ``stage(file)``, where given, takes image.exr and preview.png as soon as each is ready
+    (tracer.products.outputs.Staging: written while the rest is computed)."""
+    scene, film = world.scene, result.film
+    fill = ImageFill(film)
     run_id = uuid.uuid4().hex
-    report = {"run_id": run_id} | report
+    groups = [g for g in film.groups if g]
     attrs = {"hud:method": result.method, "hud:rays": str(result.rays), "hud:paths": str(result.paths),
              "hud:seconds": float(result.seconds), "hud:efficiency": float(result.efficiency),
              "hud:seed": str(result.seed), "hud:scene_hash": scene.scene_hash, "hud:partial": int(result.partial),
              "hud:run_id": run_id,
              "hud:units": "R,G,B,Y: apparent luminance cd/m^2 (Rec.709, Y=0.2126R+0.7152G+0.0722B); "
                           "Y_var: (cd/m^2)^2" + ("; <channel>.R,G,B,Y,Y_var: the same for each channel"
-                                                 if channels_y else "")}
-    channels = {"R": image[..., 0], "G": image[..., 1], "B": image[..., 2], "Y": y, "Y_var": var_y}
-    for g in channels_y:
-        rgb = film.rgb(g)
-        channels |= {f"{g}.R": rgb[..., 0], f"{g}.G": rgb[..., 1], f"{g}.B": rgb[..., 2], f"{g}.Y": channels_y[g],
-                     f"{g}.Y_var": film.variance_y(g)}
-    report["image"]["channels"] = list(channels)
-    if counts is not None:
-        report["image"]["samples_per_pixel"] = {"mean": float(counts.mean()), "min": int(counts.min()),
-                                                "max": int(counts.max()), "unsampled_pixels": unsampled}
+                                                 if groups else "")}
+    rgb = film.layout_rgb()  # (3, layout) cd/m^2
+    check_preview_input(rgb)
+    y_at, var_at = luminance3(rgb), film.layout_variance_y()
+    # the EXR's channels as one table of float32 columns (layout, C), the image's then each channel's
+    # layer, spread over the pixels in one pass; Y_var is then put at the sampled pixels only (0 where
+    # unmeasured: a filled pixel borrows its neighbour's value, not its error)
+    names, columns, variances = [], [], []
+    for g in [None, *groups]:
+        rgb_g = rgb if g is None else film.layout_rgb(g)
+        prefix = "" if g is None else f"{g}."
+        names += [prefix + c for c in ("R", "G", "B", "Y", "Y_var")]
+        columns += [*rgb_g, y_at if g is None else luminance3(rgb_g), np.zeros(len(y_at))]
+        variances.append(var_at if g is None else film.layout_variance_y(g))
+    pixels = fill.image(_float32(np.stack(columns, axis=1), names))  # (H, W, C)
+    for i, var_g in enumerate(variances):
+        fill.place(pixels, 5 * i + 4, _float32(var_g, [names[5 * i + 4]]))
+    if stage is not None:
+        stage(exr_file(names, pixels, attrs))
+    values, weights = fill.population(y_at)  # the image's luminance statistics, from its distinct values
+    mode = world.eye.spec.adaptation
+    adapt = adaptation_luminance(values, mode, weights)
+    codes, clipped = ward_codes(rgb.T, adapt)  # (layout, 3) sRGB codes: one per position, then spread
+    preview = fill.image(codes)  # (H, W, 3)
+    if stage is not None:
+        stage(png_file("preview.png", preview))
+    is_clipped, shown = fill.population(clipped.astype(np.float64))
+    info = ward_info(adapt, DISPLAY_MAX_LUMINANCE, float(np.average(is_clipped, weights=shown)))
+    info["adaptation_mode"] = mode
+    figures = {"mean": float(np.average(values, weights=weights)), "max": float(values[weights > 0].max()),
+               "log_average": log_average_luminance(values, weights=weights),
+               "median_relative_error": _median_relative_error(y_at, var_at, film)}
+    report = build_report(scene, result, figures, fill.shape, info, budget, integrator.efficiency_definition)
+    report["polarisation"] = world.polarisation_report()
+    report["hud"] = report["optics"] = None
+    report = {"run_id": run_id} | report
+    report["image"]["channels"] = names
+    if fill.counts is not None:
+        mean, fewest, most = fill.counts
+        report["image"]["samples_per_pixel"] = {"mean": mean, "min": fewest, "max": most,
+                                                "unsampled_pixels": fill.unsampled}
     pending = world.accel is not None
     report["analysis"] = "pending" if pending else "not run"  # what add_analysis adds: "done"
     report["analysis_seconds"] = None
-    products = Products(image, y, var_y, preview, report, channels, attrs)
+    products = Products(fill, names, pixels, preview, report, attrs)
     if analyse:
         add_analysis(products, world, integrator, result)
     return products
@@ -270,7 +307,7 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
     scene, film, report = world.scene, result.film, products.report
     sections = find_sections(world)
     sections_seconds = time.perf_counter() - t0
-    channels_y = {g: products.channels[f"{g}.Y"] for g in film.groups if g}
+    channels_y = {g: products.group_y(g) for g in film.groups if g}
     report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
         if "hud" in channels_y else hud_figures(world, products.y, sections=sections)
     if result.partial:
@@ -340,13 +377,16 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         integrator, result = run_render(integrator, budget, workers, progress, should_stop, scheduler=scheduler,
                                         keep_pool=keep_pool)
         pending = analyse and integrator.world.accel is not None
-        products = render_products(integrator.world, integrator, result, budget, analyse=False)
-        if not pending:
-            products.report["analysis"] = "not run"
-        if eye != "centre":
-            products.report["image"]["eye"] = {"side": eye, "position_mm": integrator.world.eye.position.tolist(),
-                                               "ipd_mm": float(scene.target.get("ipd_mm", 65.0))}
-        outputs.commit(products.files())
+        with outputs.staging() as stage:  # the image and preview written as soon as each is made
+            products = render_products(integrator.world, integrator, result, budget, analyse=False, stage=stage.add)
+            if not pending:
+                products.report["analysis"] = "not run"
+            if eye != "centre":
+                products.report["image"]["eye"] = {"side": eye,
+                                                   "position_mm": integrator.world.eye.position.tolist(),
+                                                   "ipd_mm": float(scene.target.get("ipd_mm", 65.0))}
+            stage.add(report_file(products.report))
+            stage.finish()
         outputs.keep()
     finally:
         outputs.close()

@@ -9,13 +9,9 @@ import math
 import numpy as np
 
 from .. import __version__
-from ..analysis.aims import aim_warnings
-from ..analysis.brightness import missing_light_warnings
 from ..core.errors import EstimateOverflowError
-from ..core.units import luminance
 from ..methods import INTEGRATORS, Budget, RenderResult
 from ..scene import Scene
-from .tonemap import log_average_luminance
 
 #: Median relative standard error of the lit pixels above which the report warns of noise.
 NOISY = 0.5
@@ -24,35 +20,31 @@ NOISY = 0.5
 def components_report(result: RenderResult) -> dict:
     """Each film component's share of the image, its mean luminance and that mean's standard error."""
     film = result.film
+    totals = {k: film.component_totals(k) for k in film.kinds}  # (sum of Y, sum of its variance) over pixels
+    total = sum(y for y, _ in totals.values())
     out = {}
-    total = float(sum(film.component_y(k).sum() for k in film.kinds))
     for name, kind in film.kinds.items():
-        y = film.component_y(name)
-        var = film.component_variance_y(name)
+        y, var = totals[name]
         count = film.norm[name]
         count = film.count_summary(name)[0] if isinstance(count, np.ndarray) else count  # per pixel: the mean
-        out[name] = {"normalised_by": kind, "count": count, "mean_cd_m2": float(y.mean()),
-                     "standard_error_cd_m2": float(math.sqrt(var.sum()) / y.size),
-                     "share": float(y.sum()) / total if total > 0 else 0.0}
+        out[name] = {"normalised_by": kind, "count": count, "mean_cd_m2": y / film.pixels,
+                     "standard_error_cd_m2": math.sqrt(var) / film.pixels,
+                     "share": y / total if total > 0 else 0.0}
     return out
 
 
-def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: np.ndarray, preview_info: dict,
-                 budget: Budget, analysis: dict | None, efficiency_definition: str = "") -> dict:
-    y = luminance(image)
-    rel_err = np.sqrt(var_y) / np.maximum(y, 1e-300)
-    lit = y > 1e-6 * max(float(y.max()), 1e-300)
-    median_err = float(np.median(rel_err[lit])) if lit.any() else None
+def build_report(scene: Scene, result: RenderResult, figures: dict, shape: tuple[int, int], preview_info: dict,
+                 budget: Budget, efficiency_definition: str = "") -> dict:
+    """The figures of a render (report.json without its analysis: tracer.products.render.add_analysis).
+    ``figures``: the image's luminance ``mean``, ``max`` and ``log_average`` (cd/m^2), and the
+    ``median_relative_error`` of its lit pixels that hold the two samples an error needs (None where
+    none does); ``shape`` (H, W)."""
+    median_err = figures["median_relative_error"]
     warnings = list(result.warnings)
     if median_err is not None and median_err > NOISY:
         warnings.append(f"the image is dominated by noise: the median relative standard error of lit pixels is "
                         f"{median_err:.2f} at efficiency {result.efficiency:.3g}; give the method more rays or time"
                         f"{INTEGRATORS[result.method].noise_advice if result.method in INTEGRATORS else ''}")
-    if analysis is not None:
-        warnings += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
-        warnings += missing_light_warnings(analysis, result.method)
-        if result.method in ("forward", "photon"):
-            warnings += aim_warnings(analysis)
     return {
         "tracer": f"hud-tracer {__version__}",
         "scene": {"name": scene.name, "folder": str(scene.root), "hash": scene.scene_hash},
@@ -69,8 +61,8 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "rays_per_second": result.rays_per_second,
         "efficiency": result.efficiency,
         "efficiency_definition": efficiency_definition,
-        "luminance": {"unit": "cd/m^2", "mean": float(y.mean()), "max": float(y.max()),
-                      "log_average": log_average_luminance(y),
+        "luminance": {"unit": "cd/m^2", "mean": figures["mean"], "max": figures["max"],
+                      "log_average": figures["log_average"],
                       "mean_standard_error": result.film.mean_standard_error()},
         "components": components_report(result),
         "replicates": result.film.replicates,
@@ -79,13 +71,13 @@ def build_report(scene: Scene, result: RenderResult, image: np.ndarray, var_y: n
         "adaptation_mode": preview_info.get("adaptation_mode", "log_average"),
         "noise": {"median_relative_standard_error_lit_pixels": median_err},
         "preview": preview_info,
-        "image": {"width": image.shape[1], "height": image.shape[0],
+        "image": {"width": shape[1], "height": shape[0],
                   "channels": ["R", "G", "B", "Y", "Y_var"],
                   "pixel_mrad": [1000 * 2 * math.atan(math.tan(math.radians(scene.eye.fov_deg[i]) / 2)) /
                                  scene.eye.resolution[i] for i in range(2)]},
         "warnings": warnings,
         "method_details": result.extra,
-        "brightness_theorem": analysis,
+        "brightness_theorem": None,
     }
 
 

@@ -22,8 +22,11 @@ import numpy as np
 from ..core.imageio import srgb_encode
 from ..core.units import luminance
 
+#: The display white luminance (cd/m^2) previews are made for (Ward's L_dmax).
+DISPLAY_MAX_LUMINANCE = 100.0
 
-def log_average_luminance(Y, delta: float = 1e-4) -> float:
+
+def log_average_luminance(Y, delta: float = 1e-4, weights=None) -> float:
     """Log-average ("key") luminance of an image, ``exp(mean(ln(delta + Y)))``.
 
     Reinhard et al. 2002, equation 1 (doi:10.1145/566654.566575); Ward 1994 adapts the eye
@@ -35,6 +38,9 @@ def log_average_luminance(Y, delta: float = 1e-4) -> float:
         Luminance, cd/m^2, >= 0. Non-finite values (NaN, +-Inf) are ignored.
     delta : float
         Small positive luminance, cd/m^2, that keeps the logarithm of black pixels finite.
+    weights : array_like of Y's shape, or None
+        How many pixels show each value of ``Y`` (an image given as its distinct values:
+        tracer.products.fill.ImageFill.population); None: one each.
 
     Returns
     -------
@@ -50,15 +56,17 @@ def log_average_luminance(Y, delta: float = 1e-4) -> float:
     if not (np.isfinite(delta) and delta > 0):
         raise ValueError(f"delta must be finite and > 0, got {delta}")
     Y = np.asarray(Y, dtype=np.float64)
-    finite = Y[np.isfinite(Y)]
-    if np.any(finite < 0):
+    finite = np.isfinite(Y)
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)[finite]
+    Y = Y[finite]
+    if np.any(Y < 0):
         raise ValueError("luminance must be >= 0")
-    if finite.size == 0:
+    if Y.size == 0 or (w is not None and not w.sum() > 0):
         return float(delta)
-    return float(np.exp(np.mean(np.log(delta + finite))))
+    return float(np.exp(np.average(np.log(delta + Y), weights=w)))
 
 
-def ward_scale_factor(L_wa: float, L_dmax: float = 100.0) -> float:
+def ward_scale_factor(L_wa: float, L_dmax: float = DISPLAY_MAX_LUMINANCE) -> float:
     """Ward's contrast-based scale factor m (Ward 1994, doi:10.1016/B978-0-12-336156-1.50054-9).
 
     ``m = [(1.219 + L_da ** 0.4) / (1.219 + L_wa ** 0.4)] ** 2.5`` with the display adaptation
@@ -90,7 +98,7 @@ def ward_scale_factor(L_wa: float, L_dmax: float = 100.0) -> float:
     return float(((1.219 + L_da**0.4) / (1.219 + L_wa**0.4)) ** 2.5)
 
 
-def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float = 100.0):
+def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float = DISPLAY_MAX_LUMINANCE):
     """8-bit sRGB preview of a linear RGB luminance image, with Ward's scale factor.
 
     Every channel is multiplied by ``m / L_dmax`` (:func:`ward_scale_factor`), values above
@@ -126,12 +134,28 @@ def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float =
     rgb = np.asarray(rgb, dtype=np.float64)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.size == 0:
         raise ValueError(f"rgb must be a non-empty (H, W, 3) array, got shape {rgb.shape}")
+    check_preview_input(rgb)
+    if adaptation_luminance is None:
+        adaptation_luminance = log_average_luminance(luminance(rgb))
+    png, clipped = ward_codes(rgb, adaptation_luminance, L_dmax)
+    return png, ward_info(adaptation_luminance, L_dmax, float(np.mean(clipped)))
+
+
+def check_preview_input(rgb: np.ndarray):
+    """ValueError for a non-finite or negative value (a bug upstream: a preview never hides one)."""
     if not np.all(np.isfinite(rgb)):
         raise ValueError("rgb holds non-finite values (NaN or Inf)")
     if np.any(rgb < 0):
         raise ValueError("rgb holds negative values")
-    if adaptation_luminance is None:
-        adaptation_luminance = log_average_luminance(luminance(rgb))
+
+
+def ward_codes(rgb: np.ndarray, adaptation_luminance: float,
+               L_dmax: float = DISPLAY_MAX_LUMINANCE) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-bit sRGB codes (..., 3) uint8 of linear RGB ``rgb`` (..., 3), cd/m^2, for an eye adapted to
+    ``adaptation_luminance`` (cd/m^2): Ward's scale factor, each channel clipped at display white, sRGB
+    encoding (:func:`tonemap_ward`); and whether each pixel (...) was clipped. Pixel by pixel, so that
+    a render computes them once per sampled pixel (tracer.products.render); ``rgb`` passed
+    :func:`check_preview_input`."""
     m = ward_scale_factor(adaptation_luminance, L_dmax)
     # in float32: 8-bit codes need 1e-3 of the range, and a 4K preview takes a third of the time and memory
     display = np.multiply(rgb, np.float32(m / L_dmax), dtype=np.float32)
@@ -140,27 +164,35 @@ def tonemap_ward(rgb, adaptation_luminance: float | None = None, L_dmax: float =
     encoded = srgb_encode(display)
     del display
     encoded *= np.float32(255.0)
-    png = np.rint(encoded, out=encoded).astype(np.uint8)
-    info = {
+    return np.rint(encoded, out=encoded).astype(np.uint8), clipped
+
+
+def ward_info(adaptation_luminance: float, L_dmax: float, clipped_fraction: float) -> dict:
+    """The preview's figures in a report (:func:`tonemap_ward`'s ``info``)."""
+    return {
         "adaptation_luminance": float(adaptation_luminance),
-        "scale_factor": m,
+        "scale_factor": ward_scale_factor(adaptation_luminance, L_dmax),
         "display_max_luminance": float(L_dmax),
-        "clipped_fraction": float(np.mean(clipped)),
+        "clipped_fraction": clipped_fraction,
         "clipping": (
             f"each channel clipped at display white (L_dmax = {L_dmax:g} cd/m^2 after Ward "
             "scaling); hue shifts in clipped pixels"
         ),
     }
-    return png, info
 
 
-def adaptation_luminance(y: np.ndarray, mode: str = "log_average") -> float:
+def adaptation_luminance(y: np.ndarray, mode: str = "log_average", weights: np.ndarray | None = None) -> float:
     """The luminance (cd/m^2) the eye adapts to, over the pixels that receive light: their log-average
     (``mode`` "log_average", Ward 1994 and Reinhard et al. 2002, eq. 1) or their arithmetic mean
     ("mean", the "average luminance" of the paper, sec. 4.1). Pixels that receive none (no environment,
     nothing in view) are left out: an eye looking at a HUD in the dark adapts to what it sees, not to
-    an infinitely dark void. The log-average weighs a bright sun or HUD symbol less than the mean."""
+    an infinitely dark void. The log-average weighs a bright sun or HUD symbol less than the mean.
+    ``weights``: how many pixels show each value of ``y`` (:func:`log_average_luminance`)."""
+    if weights is not None:  # the values some pixel shows
+        shown = weights > 0
+        y, weights = y[shown], weights[shown]
     lit = y > 1e-9 * max(float(y.max()), 1e-300)
+    w = None if weights is None else weights[lit]
     if mode == "mean":
-        return float(y[lit].mean()) if lit.any() else 0.0
-    return log_average_luminance(y[lit]) if lit.any() else log_average_luminance(y)
+        return float(np.average(y[lit], weights=w)) if lit.any() else 0.0
+    return log_average_luminance(y[lit], weights=w) if lit.any() else log_average_luminance(y, weights=weights)
