@@ -10,10 +10,11 @@ session of its own. Every 100 ms the benchmark reads the proportional set size (
 /proc/PID/smaps_rollup: shared pages split between the processes that share them) of every process of
 that session (the command and its worker processes; a sample costs about 14 ms of CPU at 4K), and
 every 5 ms it looks for report.json in the output folder (the image set is written). Per size it
-prints the wall time from the command's start until the image set is written and until the command ends (the analysis follows the image into
-report.json); the peak of the summed PSS over the whole command and until the image was written; the
-peaks of the command's own process and of the largest worker; and the render's figures from
-report.json (rays, samples per pixel, setup, the analysis's seconds). Linux only (/proc).
+prints the wall time from the command's start until the image set is written and until the command
+ends (the analysis follows the image into report.json); the peak of the summed PSS over the whole
+command and until the image was written; the peaks of the command's own process and of the largest
+worker; and the render's figures from report.json (rays, samples per pixel, setup, the analysis's
+seconds). Linux only (/proc).
 """
 
 from __future__ import annotations

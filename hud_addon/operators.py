@@ -15,6 +15,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProp
 from ..presets import PRESETS
 from ..tracer.analysis.optics import OpticsError, analyse
 from ..tracer.core.errors import SceneError, TracerError
+from ..tracer.core.validate import MAX_LUMINANCE
 from ..tracer.methods import INTEGRATORS
 from ..tracer.products.optics import OUTPUT_NAMES as OPTICS_FILES
 from ..tracer.products.optics import output_files as optics_files
@@ -131,6 +132,39 @@ class HUD_OT_add_windshield(bpy.types.Operator):
         obj.select_set(True)
         context.view_layer.objects.active = obj
         self.report({"INFO"}, f"windshield: {len(f)} triangles, {len(surfaces)} exact surfaces")
+        return {"FINISHED"}
+
+
+class HUD_OT_add_lamp(bpy.types.Operator):
+    """Add a lamp at the 3D cursor: a flat rectangle that emits as a Lambertian source toward its +Z
+    (the optical role Absorber with Emits light: black where light falls on it)"""
+
+    bl_idname = "hud.add_lamp"
+    bl_label = "Add Lamp"
+    bl_options = {"REGISTER", "UNDO"}
+
+    size_mm: FloatVectorProperty(name="Size", size=2, default=(100.0, 100.0), min=0.001, max=1e6,
+                                 description="Width (x) and height (y) of the emitting rectangle, mm")
+    luminance: FloatProperty(name="Luminance", default=1000.0, min=0.0, max=MAX_LUMINANCE,
+                             description="Luminance of its face, cd/m^2 (an LED backlight: 1e5 to 1e7)")
+    two_sided: BoolProperty(name="Two-sided", default=False, description="Emit from both faces")
+
+    def execute(self, context):
+        w, h = (v / unit_mm(context.scene) / 2.0 for v in self.size_mm)
+        mesh = bpy.data.meshes.new("lamp")
+        mesh.from_pydata([(-w, -h, 0.0), (w, -h, 0.0), (w, h, 0.0), (-w, h, 0.0)], [], [(0, 1, 2, 3)])
+        mesh.update()
+        obj = bpy.data.objects.new("lamp", mesh)
+        obj.location = context.scene.cursor.location
+        context.collection.objects.link(obj)
+        hud = obj.hud
+        hud.role, hud.emits = "absorber", True
+        hud.emission_by, hud.emission_luminance = "luminance", self.luminance
+        hud.emission_two_sided = self.two_sided
+        for o in context.selected_objects:
+            o.select_set(False)
+        obj.select_set(True)
+        context.view_layer.objects.active = obj
         return {"FINISHED"}
 
 
@@ -377,7 +411,7 @@ class HUD_OT_optical_analysis(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (HUD_OT_add_preset, HUD_OT_add_windshield, HUD_OT_export_scene, HUD_OT_show_light_paths,
+CLASSES = (HUD_OT_add_preset, HUD_OT_add_windshield, HUD_OT_add_lamp, HUD_OT_export_scene, HUD_OT_show_light_paths,
            HUD_OT_show_false_colour, HUD_OT_eyebox_sweep, HUD_OT_optical_analysis)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

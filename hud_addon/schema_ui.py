@@ -31,6 +31,29 @@ from .units import SHOWN, angle_twin, length_twin
 
 #: Field kinds with one value (size 0) or two.
 _SIZES = {"number": 0, "pair": 2, "vector2": 2}
+#: A factor's twins (a reflectance or transmittance given per colour channel, in [0, 1]): one number for
+#: its three channels (what a panel shows by default: a reflectance of 0.04 is a number, not a swatch),
+#: and whether the channels are given apart. A colour (an emitter's) stays a swatch.
+GREY = "{}_grey"
+PER_CHANNEL = "{}_per_channel"
+
+
+def _factor(f: Field) -> bool:
+    """Whether ``f`` is a factor given per colour channel (an RGB field bounded by 1)."""
+    return f.kind == "rgb" and f.maximum == 1.0
+
+
+def grey_twin(stored: str, f: Field, lo: float, hi: float):
+    """The number that sets R, G and B of the colour property ``stored`` at once (it reads their mean:
+    the value itself while they are equal)."""
+    def get(self):
+        return float(sum(getattr(self, stored))) / 3.0
+
+    def set_(self, value):
+        setattr(self, stored, (value,) * 3)
+
+    return FloatProperty(name=f.title, description=_tooltip(f) + " The same for R, G and B (the colour "
+                         "button beside it gives them apart)", min=lo, max=hi, precision=4, get=get, set=set_)
 
 
 def twin(f: Field, name: str):
@@ -101,6 +124,13 @@ def annotations(fields: tuple[Field, ...], prefix: str = "", alternatives=(), se
             shown = twin(f, prefix + f.name)
             if shown is not None:
                 out.setdefault(SHOWN.format(prefix + f.name), shown)
+            if _factor(f):
+                out.setdefault(GREY.format(prefix + f.name), grey_twin(
+                    prefix + f.name, f, 0.0 if f.minimum is None else f.minimum,
+                    1e30 if f.maximum is None else f.maximum))
+                out.setdefault(PER_CHANNEL.format(prefix + f.name), BoolProperty(
+                    name="Per channel", description=f"Give {f.title}'s R, G and B apart (a tinted glass, a "
+                                                    "coloured coating)"))
     if alternatives:
         by = _alternative_enum(alternatives, fields, "Given by")
         if f"{prefix}by" in out and out[f"{prefix}by"].keywords["items"] != by.keywords["items"]:
@@ -139,10 +169,15 @@ def draw(layout, owner, fields, prefix: str = "", alternatives=()):
                               + (f" ({image.colorspace_settings.name})" if image is not None else ""))
         else:
             shown = SHOWN.format(prefix + f.name)
+            unit = f" ({f.unit.replace('^2', '²')})" if f.unit not in ("", "1") else ""
             if shown in owner.bl_rna.properties:  # a length or angle, shown in the scene's own units
                 layout.prop(owner, shown)
+            elif _factor(f):  # one number, or R, G and B where the colour button is pressed
+                row = layout.row(align=True)
+                apart = getattr(owner, PER_CHANNEL.format(prefix + f.name))
+                row.prop(owner, prefix + f.name if apart else GREY.format(prefix + f.name), text=f"{f.title}{unit}")
+                row.prop(owner, PER_CHANNEL.format(prefix + f.name), text="", icon="COLOR")
             else:  # the unit beside the name (cd/m^2, lm, mrad ...), not only in the tooltip
-                unit = f" ({f.unit.replace('^2', '²')})" if f.unit not in ("", "1") else ""
                 layout.prop(owner, prefix + f.name, text=f"{f.title}{unit}")
 
 
@@ -229,7 +264,10 @@ def apply(owner, fields, spec: dict, prefix: str = "", alternatives=(), root: Pa
         elif f.kind == "object_ref":
             setattr(owner, name, objects[value])
         elif f.kind == "rgb":
-            setattr(owner, name, (float(value),) * 3 if not isinstance(value, list) else tuple(map(float, value)))
+            rgb = (float(value),) * 3 if not isinstance(value, list) else tuple(map(float, value))
+            setattr(owner, name, rgb)
+            if _factor(f):
+                setattr(owner, PER_CHANNEL.format(name), len(set(rgb)) > 1)
         elif f.kind == "pair":
             setattr(owner, name, (float(value),) * 2 if not isinstance(value, list) else tuple(map(float, value)))
         elif f.kind == "vector2":

@@ -60,6 +60,7 @@ class HUD_PT_render(_HudPanel, bpy.types.Panel):
         row = col.row()
         row.operator("hud.add_preset")
         row.operator("hud.add_windshield")
+        row.operator("hud.add_lamp")
         row.operator("hud.export_scene")
         col.operator("hud.show_light_paths")
 
@@ -262,7 +263,8 @@ class HUD_PT_sun(_HudPanel, bpy.types.Panel):
         col = self.layout.column()
         if light.type != "SUN":
             col.label(text="HUD Tracer exports Sun lights only, as the environment's sun;", icon="INFO")
-            col.label(text="a lamp is a mesh that emits (Object > HUD Optical Role)", icon="BLANK1")
+            col.label(text="a lamp is a mesh that emits: Add Lamp, or Object > HUD Optical Role > Emits light",
+                      icon="BLANK1")
             return
         col.prop(light.hud, "illuminance_lux", text="Illuminance (lx)")
         col.prop(light, "angle", text="Angular diameter")

@@ -13,6 +13,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.support.addon import in_blender, needs_bpy
@@ -150,9 +151,10 @@ def test_polarisation_in_blender_eye_analyser_mode_and_polarising_materials(tmp_
                                         "analyser_transmittance_across"]
     assert "polarisation" in res["drawn"]["render"]
     assert {"polariser_use", "polariser_axis_deg_shown"} <= set(res["drawn"]["lcd"])
-    assert {"transmittance", "axis_deg_shown", "retardance_deg_shown"} <= set(res["drawn"]["film"])
-    assert {"by", "reflectance_s", "transmittance_p"} <= set(res["drawn"]["splitter"])
-    assert "reflectance" not in res["drawn"]["splitter"]  # the alternative not chosen is hidden
+    assert {"transmittance_grey", "axis_deg_shown", "retardance_deg_shown"} <= set(res["drawn"]["film"])
+    assert {"by", "reflectance_s_grey", "transmittance_p_grey"} <= set(res["drawn"]["splitter"])
+    # the alternative not chosen is hidden
+    assert not {"reflectance", "reflectance_grey"} & set(res["drawn"]["splitter"])
     assert {"metal_use", "metal_complex_ior"} <= set(res["drawn"]["metal"])
     assert [k for k, _ in res["items"]] == list(POLARISATION_MODES) and all(len(d) > 40 for _, d in res["items"])
 
@@ -243,3 +245,76 @@ def test_a_role_s_fields_say_what_they_mean_for_it_and_their_units():
     assert "Lambertian reflector: diffuse albedo" in tip and "Mirror: " in tip, tip
     labels = dict(res["rows"])
     assert labels.get("emission_luminance") == "Luminance (cd/m²)", res["rows"]
+
+
+def scenario_lamp_and_factors(out):
+    """Add Lamp (80 x 40 mm, 4,000 cd/m²) and a plane mirror whose Reflectance is set through its number
+    field (0.5): the mirror's panel rows before and after the colour button, a preset's tinted
+    reflectance applied, and the scene exported to ``out`` with a camera."""
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    schema_ui = sys.modules[f"{module}.hud_addon.schema_ui"]
+    materials = sys.modules[f"{module}.tracer.optics.materials"]
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.object.camera_add(location=(0.0, 0.0, 1.0))
+    bpy.context.scene.camera = bpy.context.object
+    bpy.ops.hud.add_lamp(size_mm=(80.0, 40.0), luminance=4000.0)
+    lamp = bpy.context.object
+    bpy.ops.mesh.primitive_plane_add(size=0.2, location=(0.0, 0.3, 0.0))
+    mirror = bpy.context.object
+    mirror.name, mirror.hud.role = "mirror", "mirror"
+    mirror.hud.reflectance_grey = 0.5
+    res = {"lamp": [lamp.name, lamp.hud.role, lamp.hud.emits, lamp.hud.emission_luminance],
+           "reflectance": list(mirror.hud.reflectance)}
+
+    def rows_of(obj):
+        rows = []
+
+        class Panel:
+            layout = _LabelLayout(rows)
+
+        bpy.context.view_layer.objects.active = obj
+        sys.modules[f"{module}.hud_addon.ui"].HUD_PT_object.draw(Panel(), bpy.context)
+        return rows
+
+    res["rows_number"] = rows_of(mirror)
+    mirror.hud.reflectance_per_channel = True
+    res["rows_colour"] = rows_of(mirror)
+    mirror.hud.reflectance_per_channel = False
+    bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    schema_ui.apply(mirror.hud, materials.MATERIALS["mirror"].schema.fields, {"reflectance": [0.9, 0.5, 0.5]})
+    res["tinted"] = [mirror.hud.reflectance_per_channel, list(mirror.hud.reflectance)]
+    schema_ui.apply(mirror.hud, materials.MATERIALS["mirror"].schema.fields, {"reflectance": 0.3})
+    res["grey"] = [mirror.hud.reflectance_per_channel, mirror.hud.reflectance_grey]
+    disable(module)
+    return res
+
+
+def test_a_factor_is_a_number_and_a_lamp_is_one_button(tmp_path):
+    """Issue 31's walk-through: scalar reflectances and transmittances were colour swatches, and a lamp was
+    made by choosing "Absorber" and ticking Emits light. A factor's row is now a number (its colour button
+    gives R, G and B apart; a preset's tinted value opens it), and Add Lamp makes a rectangle that emits
+    from its +Z face: exported and loaded, 80 x 40 mm of absorber at 4,000 cd/m², beside a mirror of
+    reflectance 0.5 set through the number."""
+    from tracer.scene import load_scene
+
+    res, _ = in_blender(scenario_lamp_and_factors, tmp_path)
+    number, colour = ([tuple(r) for r in res[k]] for k in ("rows_number", "rows_colour"))
+    assert res["lamp"][1:] == ["absorber", True, 4000.0]
+    assert res["reflectance"] == pytest.approx([0.5] * 3)
+    assert ("reflectance_grey", "Reflectance") in number and ("reflectance", "Reflectance") not in number, number
+    assert {("reflectance", "Reflectance"), ("reflectance_per_channel", "")} <= set(colour)
+    assert res["tinted"][0] is True and res["tinted"][1] == pytest.approx([0.9, 0.5, 0.5])
+    assert res["grey"][0] is False and res["grey"][1] == pytest.approx(0.3)
+    scene = load_scene(tmp_path / "scene")
+    lamp = scene.object(res["lamp"][0])
+    assert next(o for o in scene.raw["objects"] if o["name"] == lamp.name)["material"]["type"] == "absorber"
+    a, b, c = lamp.triangles[0]
+    normal = np.cross(b - a, c - a)  # the emitting face toward +Z
+    assert not lamp.emission.two_sided and normal[2] > 0 and np.allclose(normal[:2], 0.0)
+    assert lamp.emission.luminance == pytest.approx(4000.0) and lamp.area_mm2 == pytest.approx(80.0 * 40.0, rel=1e-6)
+    mirror = next(o for o in scene.raw["objects"] if o["name"] == "mirror")
+    assert np.allclose(mirror["material"]["reflectance"], 0.5)
