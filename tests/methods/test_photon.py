@@ -311,3 +311,54 @@ def test_a_given_radius_far_beyond_the_automatic_one_is_warned_of_before_the_pil
         if warned:
             footprints = float(said[0].split(" is ")[1].split(" pixel")[0])
             assert 90 < footprints < 130, said
+
+
+def _retina(folder, resolution, fov_deg):
+    """The scene of ``folder`` with the eye's retina set to ``resolution`` over ``fov_deg``."""
+    import json
+
+    raw = json.loads((folder / "scene.json").read_text())
+    raw["eye"]["resolution"], raw["eye"]["fov_deg"] = list(resolution), list(fov_deg)
+    (folder / "scene.json").write_text(json.dumps(raw))
+    return folder
+
+
+def test_a_short_budget_on_a_large_retina_cuts_a_pass_into_batches(tmp_path):
+    """Issue 31: a photon batch was its photons and two passes over every pixel, so `--seconds 2` at
+    1920 x 1080 took 36 s (auto 150 s). For a time budget whose share a whole batch would overrun,
+    a batch now covers part of one pass (one sample per pixel of its part) with its photons cut in the
+    same proportion; a budget in rays, or a small retina, keeps whole batches."""
+    from tracer.methods.base import DEFAULT_BATCH, MIN_BATCH
+
+    folder = _retina(_screen(tmp_path / "s"), (1920, 1080), (2.0, 1.125))
+    short = INTEGRATORS["photon"](World(load_scene(folder)), 1)
+    short.fit_batch(Budget(seconds=0.5))
+    npix = 1920 * 1080
+    assert MIN_BATCH <= short.eye_batch < npix and MIN_BATCH <= short.batch_size < DEFAULT_BATCH
+    assert short.worker_options()["_eye_batch"] == short.eye_batch
+    rays = INTEGRATORS["photon"](World(load_scene(folder)), 1)
+    rays.fit_batch(Budget(rays=10**9))
+    assert rays.eye_batch is None and rays.batch_size == DEFAULT_BATCH
+
+
+@pytest.mark.slow
+def test_batches_of_part_of_a_pass_read_the_closed_form_and_merge_exactly(tmp_path):
+    """Batches of 64 eye samples over a 16 x 16 retina at the screen's centre (each pixel a replicate
+    of its own samples): the image reads tau E / pi within its error bars (alpha 0.01, Sidak over the
+    pixels' mean), and two worker processes give the image of one bit for bit."""
+    from tracer.runtime.parallel import render_parallel
+
+    folder = _retina(_screen(tmp_path / "s"), (16, 16), (0.5, 0.5))
+    world = World(load_scene(folder))
+    opts = dict(world.scene.method_options("photon")) | {"_eye_batch": 64}
+    one = INTEGRATORS["photon"](world, 5, 4096, opts).render(Budget(rays=3_000_000))
+    film = one.film
+    counts = film.sample_counts()
+    assert counts is not None and counts.min() >= 2 and one.batches > 4 * 256 // 64
+    y = film.rgb() @ Y_WEIGHTS
+    mean, se = float(y.mean()), math.sqrt(float(film.variance_y().sum())) / y.size
+    expected = TAU * PANEL_L * PANEL_R**2 / (PANEL_R**2 + PANEL_H**2)
+    assert abs(mean - expected) < t_bound(1, int(counts.min()) - 1) * se and se < 0.03 * expected, (mean, se)
+    two = render_parallel(INTEGRATORS["photon"](World(load_scene(folder)), 5, 4096, opts), Budget(rays=3_000_000),
+                          workers=2)
+    assert one.batches == two.batches and np.array_equal(one.film.rgb(), two.film.rgb())

@@ -124,3 +124,22 @@ def test_longer_renders_confirm_the_choice_on_the_lens_spot(tmp_path):
     assert 0.01 * spot.size < spot.sum() < 0.2 * spot.size
     error = {m: math.sqrt(var[spot].sum() * rays_m) / y[spot].sum() for m, (rays_m, y, var) in longer.items()}
     assert error["backward"] > 10 * error[chosen], error  # 22 times on this seed
+
+
+def test_pilots_of_a_large_retina_run_on_a_coarser_one_of_the_same_field(tmp_path):
+    """Issue 31: auto's pilots traced whole passes over the retina (150 s for `--seconds 2` at 1920 x
+    1080 on hud-screen). Above PILOT_PIXELS they run on a retina of the same field of view with at most
+    that many pixels, its aspect kept; a preset's own retina is piloted as it is."""
+    import dataclasses
+
+    from presets import PRESETS
+    from tracer.methods.pilots import PILOT_PIXELS, pilot_world
+    from tracer.transport.world import World
+
+    world = World(load_scene(PRESETS["hud-screen"].write(tmp_path / "s")))
+    assert pilot_world(world) is world
+    large = world.with_eye(dataclasses.replace(world.eye.spec, resolution=(1920, 1080)))
+    coarse = pilot_world(large).eye
+    assert coarse.width * coarse.height <= PILOT_PIXELS and (coarse.width, coarse.height) == (341, 192)
+    assert np.array_equal(coarse.spec.fov_deg, large.eye.spec.fov_deg)
+    assert np.array_equal(coarse.spec.position, large.eye.spec.position)

@@ -203,15 +203,15 @@ class BackwardTracer(Integrator, PathMethod):
         found = self._run(ctx, pix, rep)
         return len(pix), found, {"hit": spp, "connection": spp}, spp
 
-    def batch_pixels(self, index: int) -> np.ndarray:
-        """The pixels (k,) of batch ``index`` where a batch is smaller than the image: a pass over the
-        pixels is cut into ceil(pixels / batch_size) equal parts, batch k takes part k mod parts of pass
-        k // parts, and the pass visits the pixels in the order i * step mod pixels (step near the
-        golden section of the pixel count and prime to it), so that the batches merged so far cover the
-        image evenly, a render stopped early has its samples spread over the whole retina, and batch
-        k's pixels depend on k alone (seed-addressed)."""
+    def batch_pixels(self, index: int, size: int | None = None) -> np.ndarray:
+        """The pixels (k,) of batch ``index`` where a batch of ``size`` samples (default ``batch_size``)
+        is smaller than the image: a pass over the pixels is cut into ceil(pixels / size) equal parts,
+        batch k takes part k mod parts of pass k // parts, and the pass visits the pixels in the order
+        i * step mod pixels (step near the golden section of the pixel count and prime to it), so that
+        the batches merged so far cover the image evenly, a render stopped early has its samples spread
+        over the whole retina, and batch k's pixels depend on k alone (seed-addressed)."""
         n = self.npix
-        parts = -(-n // self.batch_size)
+        parts = -(-n // (size or self.batch_size))
         size = -(-n // parts)
         if self._pass_step is None:
             step = int(round(n * 0.6180339887498949))

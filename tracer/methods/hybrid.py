@@ -80,6 +80,7 @@ from .pilots import (
     Pilot,
     applicable,
     pilot_batch_size,
+    pilot_world,
     relative_variances,
     run_pilot,
 )
@@ -207,9 +208,10 @@ class _Channels(Integrator):
         spent_rays = 0
         for c in live:
             c.pilots = [Pilot(m, why) for m, why in c.candidates.items() if why is not None and c.asked == "auto"]
+            world = pilot_world(c.world)  # a coarser retina of the same field where the image is large
             for m in trials[c.name]:
-                size = pilot_batch_size(m, self.eye.width * self.eye.height)
-                integ = self._make(c, m, self._seed(c, pilot=True), size)
+                size = pilot_batch_size(m, world.eye.width * world.eye.height)
+                integ = INTEGRATORS[m](world, self._seed(c, pilot=True), size, self.scene.method_options(m))
                 c.pilots.append(run_pilot(integ, m, seconds, rays, in_rays))
                 spent_rays += c.pilots[-1].rays
             ran = [p for p in c.pilots if p.skipped is None]

@@ -63,7 +63,7 @@ from ..transport.path import (
     trace,
 )
 from .backward import BackwardTracer
-from .base import DEFAULT_BATCH, WAVE, register
+from .base import BATCH_SHARE_OF_TIME, DEFAULT_BATCH, MIN_BATCH, PILOT_PATHS, WAVE, register
 from .forward import Particles
 
 #: Independent replicates per batch: eye passes over all pixels, each with its own share of photons.
@@ -258,6 +258,9 @@ class PhotonTracer(BackwardTracer):
         self.particles = Particles(w) if can_emit else None
         self._vis: list[tuple] = []
         self._footprint_pass = False
+        #: Eye samples per batch where a batch covers part of a pass (:meth:`fit_batch`), else None.
+        self.eye_batch: int | None = self.opts.get("_eye_batch")
+        self._pilot_eye_samples = 0
         #: The photon pass's roulette scale (PhotonPass.potential), set by the pilot (:meth:`pilot_mean`).
         self.photon_scale = math.inf
         if not w.environment.is_black:
@@ -358,8 +361,27 @@ class PhotonTracer(BackwardTracer):
                 "running) and the image is blurred over it; 0 chooses the radius")
 
     def fit_batch(self, budget):
-        """Batches keep their photon count (the gather radius was chosen for it); only the pilot runs."""
+        """Batches keep their photons and their REPLICATES passes over the pixels where such a batch
+        takes at most :data:`BATCH_SHARE_OF_TIME` of a budget in seconds (by the pilot's pace, photons
+        and eye samples alike). Where it would take longer (a large retina, a short budget), a batch
+        covers part of one pass, as the backward method's do (:meth:`batch_pixels`: one sample through
+        each pixel of its part, one replicate, counts per pixel), and its photons shrink in the same
+        proportion (at least :data:`MIN_BATCH`): a render can stop after any batch. The gather radius
+        follows the batch index whatever a batch's photons (:func:`radius_schedule`)."""
         self.reference_luminance  # noqa: B018
+        if not self.auto_batch or budget.seconds is None or self.eye_batch is not None:
+            return
+        pace = (PILOT_PATHS + self._pilot_eye_samples) / max(self.pilot_seconds, 1e-6)
+        whole = self.batch_size + REPLICATES * self.npix
+        share = pace * budget.seconds * BATCH_SHARE_OF_TIME / whole
+        eye = max(MIN_BATCH, int(share * REPLICATES * self.npix))
+        if eye >= self.npix:
+            return  # a batch of at least one pass: whole batches overrun by at most that pass
+        self.eye_batch = eye
+        self.batch_size = max(MIN_BATCH, int(share * self.batch_size))
+
+    def worker_options(self) -> dict:
+        return dict(self.opts) | {"_eye_batch": self.eye_batch}
 
     def radius(self, batch: int) -> float:
         """The gather radius (mm) of batch ``batch`` (:func:`radius_schedule`)."""
@@ -473,7 +495,12 @@ class PhotonTracer(BackwardTracer):
         return int(ctx.sample_found.sum())
 
     def run_batch(self, ctx):
-        """One batch (trace_batch has run the pilot first, which sets r_0)."""
+        """One batch (trace_batch has run the pilot first, which sets r_0): REPLICATES passes over the
+        pixels, or one sample through each pixel of the batch's part of a pass (:meth:`fit_batch`)."""
+        if self.eye_batch is not None:
+            pix = self.batch_pixels(ctx.batch, self.eye_batch)
+            found = self._batch(ctx, pix, np.zeros(len(pix), np.int64), 1, self.batch_size, self.radius(ctx.batch))
+            return len(pix), found, dict.fromkeys(self.components, pix), 1
         pix = np.tile(np.arange(self.npix), REPLICATES)
         rep = np.repeat(np.arange(REPLICATES), self.npix)
         found = self._batch(ctx, pix, rep, REPLICATES, self.batch_size, self.radius(ctx.batch))
@@ -490,7 +517,7 @@ class PhotonTracer(BackwardTracer):
         else:
             self._check_given_radius(ctx.rng)
         n = self.batch_size
-        k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
+        k = self._pilot_eye_samples = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
         pix = ctx.rng.integers(0, self.npix, k)
         self._batch(ctx, pix, np.zeros(k, np.int64), 1, n, self.r0)
         total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)

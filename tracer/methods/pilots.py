@@ -10,6 +10,7 @@ typical pixel as well as the brightest.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -22,6 +23,28 @@ from .base import DEFAULT_BATCH, SMALLEST_BATCH, Integrator
 
 #: Paths per pilot batch (a backward batch covers every pixel a whole number of times).
 PILOT_BATCH = 1 << 14
+
+
+#: Most pixels of a pilot's retina: the pilots of a larger retina run on a coarser one (:func:`pilot_world`).
+PILOT_PIXELS = 1 << 16
+
+
+def pilot_world(world):
+    """The world in which a channel's pilots run: ``world``, or, where its retina has more than
+    :data:`PILOT_PIXELS` pixels, the same with a coarser retina of the same field of view (at most
+    that many pixels, the aspect kept). Pilots compare methods by V x cost, and every method's
+    per-pixel variance grows with the pixel count in the same proportion (its samples, particles or
+    photons spread over the pixels: backward 1 / spp = pixels / N, forward and photon pixels / N
+    through the pixel's area and the footprint-sized gather radius), so the choice made on the coarse
+    retina holds at full size, while the pilots of a 4K retina cost what those of 256 x 256 do (a pass
+    over every pixel per pilot batch took minutes there)."""
+    eye = world.eye
+    pixels = eye.width * eye.height
+    if pixels <= PILOT_PIXELS:
+        return world
+    f = math.sqrt(PILOT_PIXELS / pixels)
+    coarse = (max(1, int(eye.width * f)), max(1, int(eye.height * f)))
+    return world.with_eye(dataclasses.replace(eye.spec, resolution=coarse))
 
 
 #: A pilot runs at least this many batches and until its film holds this many replicates.
