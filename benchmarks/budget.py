@@ -114,7 +114,7 @@ def main():
                 print(f"{size:>10} {m['image_written_s']:>12.2f} s {m['ended_s']:>11.2f} s "
                       f"{m['peak_pss_gb']:>6.2f} GB {m['peak_until_image_gb']:>5.2f} GB "
                       f"{m['command_peak_gb']:>5.2f} GB {m['worker_peak_gb']:>4.2f} GB {m['rays']:>11,} "
-                      f"{m['samples_per_pixel']:>6.3f} "
+                      + (f"{m['samples_per_pixel']:>6.3f} " if m["samples_per_pixel"] is not None else f"{'-':>6} ") +
                       f"{m['setup_s']:>5.2f}s {m['analysis_s'] or 0:>7.2f}s", flush=True)
 
 

@@ -279,3 +279,18 @@ def test_warnings_for_a_backward_forward_and_a_pair_wider_than_the_eyebox(tmp_pa
     assert "target.forward" in text and "no binocular pair fits" in text
     edit_json(folder, lambda d: d.__setitem__("target", {}))
     assert analyse_doc(folder)["warnings"] == []
+
+
+def test_a_screen_hud_s_analysis_from_the_render_s_world(tmp_path):
+    """hud-screen's projection screen is its PGU, a Lambertian transmitter: the analysis from a render's
+    own world (its polarisation on) asked that screen for its transmitted delta branch and stopped every
+    render of the preset with a NotImplementedError traceback (exit 1) after the image. A scattering
+    PGU sends its light depolarised: the analysis gives its figures, the same as without the world."""
+    from presets import PRESETS
+    from tracer.analysis.optics import optics_block
+
+    scene = load_scene(PRESETS["hud-screen"].write(tmp_path / "s"))
+    with_world = optics_block(scene, World(scene))
+    alone = optics_block(scene, None)
+    assert "error" not in with_world, with_world.get("error")
+    assert with_world["design_eye"]["vid_mm"] == pytest.approx(alone["design_eye"]["vid_mm"], rel=1e-9)

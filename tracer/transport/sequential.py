@@ -173,10 +173,12 @@ def _at_pgu(world, pgu: int, beta: np.ndarray, extra: dict, o: np.ndarray, d: np
     if obj.emission is not None:
         beta[:, on] = polar.emitted(b, sub, d_on.astype(F32), np.full(len(on), pgu))
         return beta
+    if not mat.delta:  # a scattering PGU (a projection screen) sends its light depolarised
+        return beta
     p = take(o, on) + hits.t[on] * d_on
     it = world.interaction(hits.face[on], p, d_on, material=mat)
     lobe = [lb for lb in mat.lobes(it, RADIANCE) if lb[2] & TRANSMISSION]
-    if not mat.delta or not lobe:
+    if not lobe:
         return beta
     wo, flags = lobe[0][0], lobe[0][2]
     beta[:, on], _, _ = polar.scatter(b, sub, it, mat, wo, np.ones((3, len(on)), F32),
