@@ -24,17 +24,56 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
+import ctypes
 import json
 import os
 import shutil
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTENSION_ID = "hud_tracer"
 #: The files of a hud-render, written as a set.
 OUTPUT_NAMES = ("image.exr", "report.json", "falsecolour.png")
+
+
+#: The lines Blender prints on standard output for the engine's reports in background mode: hud-render
+#: says each again on standard error, in its own words ("warning: ...", "error: FILE: ..."), once.
+ENGINE_REPORTS = (b"Error: HUD Tracer: ", b"Warning: HUD Tracer: ", b"Info: HUD Tracer: ")
+
+
+@contextlib.contextmanager
+def _engine_reports_left_out():
+    """While the block runs, what the process writes on file descriptor 1 (Blender's own lines, its
+    workers') goes on to standard output line by line, except Blender's echo of the engine's reports
+    (:data:`ENGINE_REPORTS`). The forwarding thread stays to the process's end: worker processes
+    started during the block keep writing into it."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):  # no file descriptor 1 (an embedding host): nothing to leave out
+        yield
+        return
+    read_end, write_end = os.pipe()
+
+    def forward():
+        with os.fdopen(read_end, "rb") as lines:
+            for line in lines:
+                if not line.startswith(ENGINE_REPORTS):
+                    os.write(saved, line)
+
+    threading.Thread(target=forward, name="hud-render stdout", daemon=True).start()
+    os.dup2(write_end, 1)
+    os.close(write_end)
+    try:
+        yield
+    finally:
+        ctypes.CDLL(None).fflush(None)  # Blender's buffered C output into the pipe first
+        sys.stdout.flush()
+        os.dup2(saved, 1)
 
 
 def enable_from_source(bpy, tmp: Path) -> str:
@@ -138,7 +177,8 @@ def _render(args, blend: Path, outputs) -> int:
     engine = sys.modules[f"{module}.hud_addon.engine"]
     engine.LAST_RENDER.clear()
     try:
-        bpy.ops.render.render(write_still=True)
+        with _engine_reports_left_out():  # said once below, as "warning: ..." and "error: FILE: ..."
+            bpy.ops.render.render(write_still=True)
     except RuntimeError as e:  # the engine reported an error: Blender raises it in background mode
         if "error" not in engine.LAST_RENDER:  # Blender refused before the engine ran: the file's settings
             print(f"error: {blend.name}: {_blender_reason(e)} (Blender's check of the file's scene, camera and "

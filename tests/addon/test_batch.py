@@ -142,3 +142,25 @@ def test_hud_render_of_a_file_blender_cannot_render_exits_2_in_one_line(tmp_path
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
         assert len(ours) == 1 and blend.name in ours[0] and words in ours[0], proc.stderr
         assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.slow
+def test_hud_render_says_each_warning_and_error_once(tmp_path):
+    """Issue 31's walk-through: hud-render printed every warning and error twice, Blender's echo of the
+    engine's report on standard output ("Warning: HUD Tracer: ...") and its own line on standard error.
+    A .blend with a camera and no light: the dark-scene warning once, Blender's other lines kept."""
+    blend = tmp_path / "dark.blend"
+    made = subprocess.run([sys.executable, "-c", "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); "
+                           "bpy.ops.object.camera_add(location=(0, 0, 1)); "
+                           "bpy.context.scene.camera = bpy.context.object; "
+                           "bpy.ops.mesh.primitive_plane_add(size=1, location=(0, 0, -1)); "
+                           f"bpy.ops.wm.save_as_mainfile(filepath={str(blend)!r})"], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert made.returncode == 0 and blend.is_file(), made.stderr[-2000:]
+    proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(tmp_path / "out"),
+                           "--rays", "100000"], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    both = proc.stdout + proc.stderr
+    assert both.count("the scene has no light source") == 1, both
+    assert "warning: the scene has no light source" in proc.stderr and "HUD Tracer:" not in proc.stdout
+    assert "Saved:" in proc.stdout  # Blender's own lines go on
