@@ -292,10 +292,6 @@ class Film:
         out[..., self._pixel[:self._used]] = values
         return out
 
-    def positions(self, pixels: np.ndarray) -> np.ndarray:
-        """The positions in the layout of flat ``pixels`` that were sampled (each has one)."""
-        return self._at(pixels)
-
     def _each_array(self, remake):
         """Replace every per-pixel array ``a`` by ``remake(a, fill)``, ``fill`` being its value at pixels
         not yet sampled."""
