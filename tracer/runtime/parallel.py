@@ -276,6 +276,10 @@ class WorkerPool:
 #: The session's pool (:func:`shared_pool`), and pools closed without waiting for their workers' exit.
 _SHARED: list[WorkerPool] = []
 _CLOSING: list[WorkerPool] = []
+#: Whether the exit handler that ends the pool is registered (:func:`shared_pool`). At the interpreter's
+#: exit the pool is terminated, not closed: closing and joining there can wait forever on a worker (the
+#: command line and Blender close the pool before, when their work ends).
+_EXIT_HOOK: list[bool] = []
 
 
 def shared_pool(workers: int) -> WorkerPool:
@@ -285,6 +289,14 @@ def shared_pool(workers: int) -> WorkerPool:
         close_shared_pool()
     if not _SHARED:
         _SHARED.append(WorkerPool(workers))
+        if not _EXIT_HOOK:
+            # Registered after the first pool, and so after multiprocessing's own exit handler (registered
+            # as the pool imports multiprocessing.util): handlers run in reverse, so ours ends the pool
+            # first, with the workers told (``ending``) that their SIGTERM is the end. The other way
+            # round, multiprocessing terminated the workers, which ignored a SIGTERM nobody had
+            # announced, and joined them forever (hud-render, whose process exits with the pool open).
+            atexit.register(close_shared_pool, terminate=True)
+            _EXIT_HOOK.append(True)
     return _SHARED[0]
 
 
@@ -301,9 +313,6 @@ def close_shared_pool(terminate: bool = False, wait: bool = True):
         _CLOSING.pop().pool.join()
 
 
-# At the interpreter's exit, as multiprocessing's own finaliser would: closing and joining there can wait
-# forever on a worker (the command line and Blender close the pool before, when their work ends).
-atexit.register(close_shared_pool, terminate=True)
 
 
 class PoolExecutor:
