@@ -15,14 +15,17 @@ follow the image), whether the worker pool was started or reused, and the rays t
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
+import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="hud-bpy-user-")
+os.environ["BLENDER_USER_RESOURCES"] = _USER = tempfile.mkdtemp(prefix="hud-bpy-user-")
+atexit.register(shutil.rmtree, _USER, ignore_errors=True)  # Blender's user resources: about 100 MB
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402  (the environment above must be set first)

@@ -10,7 +10,9 @@ preset or a FILE that exists (it is never overwritten) or whose folder does not.
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -35,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     if not target.parent.is_dir():
         ap.error(f"{args.blend}: no folder {target.parent}")
     tmp = Path(tempfile.mkdtemp(prefix="preset-blend-"))
+    atexit.register(shutil.rmtree, tmp, ignore_errors=True)  # Blender's user resources: about 100 MB
     os.environ.setdefault("BLENDER_USER_RESOURCES", str(tmp / "user"))
     import bpy
 

@@ -6,15 +6,20 @@ prints the function's result as one line "HUD_RESULT <json>"."""
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import json
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="hud-bpy-user-")
+# Blender's user resources (about 100 MB once bpy starts): removed at exit, after the scenario's own exit
+# handlers (registered later, run first), or every scenario of every test run stays in the temp folder
+os.environ["BLENDER_USER_RESOURCES"] = _USER = tempfile.mkdtemp(prefix="hud-bpy-user-")
+atexit.register(shutil.rmtree, _USER, ignore_errors=True)
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402, F401  (the environment above must be set first)
