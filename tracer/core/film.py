@@ -88,6 +88,18 @@ def _filled(shape: tuple, fill, dtype) -> np.ndarray:
     return np.zeros(shape, dtype) if fill == 0 else np.full(shape, fill, dtype)
 
 
+def _placed(values: np.ndarray, size: int, at, fill, axis: int = -1) -> np.ndarray:
+    """``values`` put at the indices ``at`` (an index array or a slice) along ``axis`` (-1 or 0) of an
+    array of ``size`` there, ``fill`` elsewhere."""
+    if axis == 0:
+        out = _filled((size,) + values.shape[1:], fill, values.dtype)
+        out[at] = values
+    else:
+        out = _filled(values.shape[:-1] + (size,), fill, values.dtype)
+        out[..., at] = values
+    return out
+
+
 def _columns(cols: np.ndarray, a: np.ndarray, npix: int):
     """A batch's per-pixel array ``a`` (..., m) over the columns ``cols`` (m,) of the film, as it travels:
     its non-zero columns (:class:`Columns`) where they are fewer than :data:`SPARSE_SHARE` of the film's
@@ -283,14 +295,12 @@ class Film:
         a number as it is."""
         return a if self._slot is None or np.ndim(a) == 0 else a[..., :self._used]
 
-    def to_pixels(self, values: np.ndarray, fill=0) -> np.ndarray:
+    def to_pixels(self, values: np.ndarray, fill=0, axis: int = -1) -> np.ndarray:
         """(..., pixels) flat, from ``values`` (..., layout) over the layout's positions in use, ``fill``
-        at pixels not yet sampled."""
+        at pixels not yet sampled; with ``axis`` 0, (pixels, ...) from (layout, ...)."""
         if self._slot is None:
             return values
-        out = _filled(values.shape[:-1] + (self.pixels,), fill, values.dtype)
-        out[..., self._pixel[:self._used]] = values
-        return out
+        return _placed(values, self.pixels, self._pixel[:self._used], fill, axis)
 
     def _each_array(self, remake):
         """Replace every per-pixel array ``a`` by ``remake(a, fill)``, ``fill`` being its value at pixels
@@ -310,13 +320,7 @@ class Film:
         if self._slot is None:
             return
         used, at = self._used, self._pixel[:self._used]
-
-        def spread(a, fill):
-            out = _filled(a.shape[:-1] + (self.pixels,), fill, a.dtype)
-            out[..., at] = a[..., :used]
-            return out
-
-        self._each_array(spread)
+        self._each_array(lambda a, fill: _placed(a[..., :used], self.pixels, at, fill))
         self._slot, self._pixel, self._used = None, np.zeros(0, np.int64), 0
         self._lum.clear()
 
@@ -340,9 +344,7 @@ class Film:
             capacity = min(self.pixels, max(used, capacity + capacity // 2, 1024))
 
             def grow(a, fill):
-                out = _filled(a.shape[:-1] + (capacity,), fill, a.dtype)
-                out[..., :a.shape[-1]] = a
-                return out
+                return _placed(a, capacity, slice(0, a.shape[-1]), fill)
 
             self._each_array(grow)
             self._pixel = grow(self._pixel, 0)

@@ -117,19 +117,20 @@ def _c_stderr_silenced():
                 _silence_saved = None
 
 
-def _read_pixels(path, kind=oiio.FLOAT) -> tuple[oiio.ImageSpec, np.ndarray]:
+def _read_pixels(path, kind=oiio.FLOAT, rows: tuple[int, int] | None = None) -> tuple[oiio.ImageSpec, np.ndarray]:
     """Read the first subimage of ``path`` as stored, as float32 of shape (H, W, C) (``kind``
-    ``oiio.UINT8``: as 8-bit codes, uint8).
+    ``oiio.UINT8``: as 8-bit codes, uint8); ``rows`` (begin, end): those rows only, (end - begin, W, C)
+    (only the blocks that hold them are read and decoded).
 
     Colour is not multiplied by alpha (the ``oiio:UnassociatedAlpha`` reader hint). Raises
     :class:`ImageReadError` with OpenImageIO's error text on failure; what the format's C library
     prints on the way is kept off the terminal (a truncated PNG made libpng print two more lines).
     """
     with _c_stderr_silenced():
-        return _read_pixels_as_stored(path, kind)
+        return _read_pixels_as_stored(path, kind, rows)
 
 
-def _read_pixels_as_stored(path, kind) -> tuple[oiio.ImageSpec, np.ndarray]:
+def _read_pixels_as_stored(path, kind, rows) -> tuple[oiio.ImageSpec, np.ndarray]:
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)
@@ -137,13 +138,18 @@ def _read_pixels_as_stored(path, kind) -> tuple[oiio.ImageSpec, np.ndarray]:
         raise ImageReadError(path, oiio.geterror() or "cannot open the file")
     try:
         spec = inp.spec()
-        pixels = inp.read_image(kind)
+        if rows is None:
+            pixels = inp.read_image(kind)
+        else:
+            pixels = inp.read_scanlines(rows[0], rows[1], 0, 0, spec.nchannels, kind)
         if pixels is None:
-            raise ImageReadError(path, inp.geterror() or "cannot read the pixels")
+            what = "the pixels" if rows is None else f"rows {rows[0]} to {rows[1]}"
+            raise ImageReadError(path, inp.geterror() or f"cannot read {what}")
     finally:
         inp.close()
     pixels = np.asarray(pixels, dtype=np.uint8 if kind == oiio.UINT8 else np.float32)
-    return spec, pixels.reshape(spec.height, spec.width, spec.nchannels)
+    height = spec.height if rows is None else rows[1] - rows[0]
+    return spec, pixels.reshape(height, spec.width, spec.nchannels)
 
 
 def read_codes(path) -> np.ndarray:
@@ -306,18 +312,7 @@ def read_exr_rows(path, ybegin: int, yend: int) -> tuple[dict[str, np.ndarray], 
     (rows, W) views, with its header metadata (:func:`read_exr_channels` of part of the image: only the
     blocks that hold those rows are read and decoded). Raises :class:`ImageReadError`, for instance
     where the file ends before those rows."""
-    with _c_stderr_silenced():
-        inp = oiio.ImageInput.open(str(path))
-        if inp is None:
-            raise ImageReadError(path, oiio.geterror() or "cannot open the file")
-        try:
-            spec = inp.spec()
-            rows = inp.read_scanlines(ybegin, yend, 0, 0, spec.nchannels, oiio.FLOAT)
-            if rows is None:
-                raise ImageReadError(path, inp.geterror() or f"cannot read rows {ybegin} to {yend}")
-        finally:
-            inp.close()
-    rows = np.asarray(rows, dtype=np.float32).reshape(yend - ybegin, spec.width, spec.nchannels)
+    spec, rows = _read_pixels(path, rows=(ybegin, yend))
     return ({name: rows[..., i] for i, name in enumerate(spec.channelnames)},
             {a.name: a.value for a in spec.extra_attribs})
 

@@ -260,7 +260,6 @@ class PhotonTracer(BackwardTracer):
         self._footprint_pass = False
         #: Eye samples per batch where a batch covers part of a pass (:meth:`fit_batch`), else None.
         self.eye_batch: int | None = self.opts.get("_eye_batch")
-        self._pilot_eye_samples = 0
         #: The photon pass's roulette scale (PhotonPass.potential), set by the pilot (:meth:`pilot_mean`).
         self.photon_scale = math.inf
         if not w.environment.is_black:
@@ -371,7 +370,8 @@ class PhotonTracer(BackwardTracer):
         self.reference_luminance  # noqa: B018
         if not self.auto_batch or budget.seconds is None or self.eye_batch is not None:
             return
-        pace = (PILOT_PATHS + self._pilot_eye_samples) / max(self.pilot_seconds, 1e-6)
+        pilot_eye_samples = min(PILOT_PATHS, PILOT_SAMPLES_PER_PIXEL * self.npix)  # as pilot_mean traces them
+        pace = (PILOT_PATHS + pilot_eye_samples) / max(self.pilot_seconds, 1e-6)
         whole = self.batch_size + REPLICATES * self.npix
         share = pace * budget.seconds * BATCH_SHARE_OF_TIME / whole
         eye = max(MIN_BATCH, int(share * REPLICATES * self.npix))
@@ -517,7 +517,7 @@ class PhotonTracer(BackwardTracer):
         else:
             self._check_given_radius(ctx.rng)
         n = self.batch_size
-        k = self._pilot_eye_samples = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
+        k = min(n, PILOT_SAMPLES_PER_PIXEL * self.npix)
         pix = ctx.rng.integers(0, self.npix, k)
         self._batch(ctx, pix, np.zeros(k, np.int64), 1, n, self.r0)
         total = sum(float(luminance3(ctx.splats.gather(c)[2]).sum()) for c in self.components)

@@ -15,6 +15,8 @@ the next sampled pixel of its row.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..core.film import Film, summarise_counts
@@ -46,15 +48,18 @@ class ImageFill:
         self.shape = (film.height, film.width)
         self.unsampled = 0
         self.counts = None
+        #: Samples through the pixel at each position of the film's layout where batches covered part of
+        #: the image, else None.
+        self.per_position: np.ndarray | None = None
         self._runs = None  # (positions (k,), lengths (k,)): the image, row by row, as runs of one value
         found = film.layout_sample_counts()
         if found is None:
             return
-        per_position, outside = found
-        self.counts = summarise_counts(per_position, outside, film.pixels)
+        self.per_position, outside = found
+        self.counts = summarise_counts(self.per_position, outside, film.pixels)
         if outside > 0:  # every pixel was sampled
             return
-        sampled = np.flatnonzero(per_position > 0)
+        sampled = np.flatnonzero(self.per_position > 0)
         self.unsampled = film.pixels - len(sampled)
         if 0 < self.unsampled < film.pixels:
             pixels = film.layout_pixels()[sampled]
@@ -100,11 +105,7 @@ class ImageFill:
     def as_film(self, values: np.ndarray) -> np.ndarray:
         """(H, W, ...) from per-position ``values`` (layout, ...) that no pixel borrows (a variance: a
         filled pixel is unmeasured): zero at the pixels not in the layout."""
-        if self.film.dense:
-            return values.reshape(self.shape + values.shape[1:])
-        out = np.zeros((self.film.pixels,) + values.shape[1:], values.dtype)
-        out[self.film.layout_pixels()] = values
-        return out.reshape(self.shape + values.shape[1:])
+        return self.film.to_pixels(values, axis=0).reshape(self.shape + values.shape[1:])
 
     def place(self, image: np.ndarray, channel: int, values: np.ndarray):
         """Write per-position ``values`` (layout,) into channel ``channel`` of ``image`` (H, W, C),
@@ -116,13 +117,20 @@ class ImageFill:
         (k,), float): the per-position values, each with the pixels that show it, and a 0 for the
         pixels outside the layout that show nothing. A statistic over the image (a mean, a maximum,
         the share of clipped pixels) is the same statistic over this weighted population."""
-        film = self.film
+        weights = self._weights
+        if len(weights) > len(values):  # the pixels that show nothing
+            return np.append(values, 0), weights
+        return values, weights
+
+    @functools.cached_property
+    def _weights(self) -> np.ndarray:
+        """How many pixels show each position's value (layout,), then those that show nothing where
+        there are any (:meth:`population`)."""
+        size = self.film.layout_pixels().size
         if self._runs is not None:
             positions, lengths = self._runs
-            weights = np.bincount(positions, weights=lengths, minlength=len(values))
+            weights = np.bincount(positions, weights=lengths, minlength=size)
         else:
-            weights = np.ones(len(values))
-        blank = film.pixels - int(weights.sum())
-        if blank:
-            return np.append(values, 0), np.append(weights, blank)
-        return values, weights
+            weights = np.ones(size)
+        blank = self.film.pixels - int(weights.sum())
+        return np.append(weights, blank) if blank else weights

@@ -181,42 +181,38 @@ class Products:
     ``var_y`` (H, W) float64 (made when first asked for: the analysis and Blender ask, the files do
     not), the preview (sRGB uint8, Ward 1994), the report (:func:`build_report`, with ``run_id``), the
     EXR's channels ``names`` interleaved in ``pixels`` (H, W, C) float32 (``channels``: each by name,
-    a view) and its header attributes (``hud:*``). ``files()`` are the command line's three output
-    files."""
+    a view) and its header attributes (``hud:*``)."""
 
     def __init__(self, fill: ImageFill, names: list[str], pixels: np.ndarray, preview: np.ndarray, report: dict,
-                 attrs: dict):
+                 attrs: dict, layout_y: np.ndarray, layout_var_y: np.ndarray):
         self.fill, self.names, self.pixels, self.preview, self.report = fill, names, pixels, preview, report
         self.attrs = attrs
+        # the image's luminance (cd/m^2) and its variance per position of the film's layout
+        self._layout_y, self._layout_var_y = layout_y, layout_var_y
         self.image = pixels[..., :3]
         self.channels = {name: pixels[..., k] for k, name in enumerate(names)}  # views, (H, W) each
 
     @functools.cached_property
     def y(self) -> np.ndarray:
-        return self.group_y(None)
+        return self.fill.image(self._layout_y)
 
     @functools.cached_property
     def var_y(self) -> np.ndarray:
-        return self.fill.as_film(self.fill.film.layout_variance_y())
+        return self.fill.as_film(self._layout_var_y)
 
-    def group_y(self, group: str | None) -> np.ndarray:
-        """(H, W) float64 luminance, cd/m^2, of the image (of one channel: a film group)."""
+    def group_y(self, group: str) -> np.ndarray:
+        """(H, W) float64 luminance, cd/m^2, of one channel of the image (a film group)."""
         return self.fill.image(luminance3(self.fill.film.layout_rgb(group)))
 
-    def files(self) -> list[OutputFile]:
-        return [exr_file(self.names, self.pixels, self.attrs), png_file("preview.png", self.preview),
-                report_file(self.report)]
 
-
-def _median_relative_error(y: np.ndarray, var_y: np.ndarray, film) -> float | None:
+def _median_relative_error(y: np.ndarray, var_y: np.ndarray, fill: ImageFill) -> float | None:
     """The median relative standard error of the lit pixels that hold the two samples an error needs,
-    from per-position luminance ``y`` and variance ``var_y`` (layout,) of ``film`` (a filled pixel is
-    unmeasured); None where no pixel is lit and measured."""
+    from per-position luminance ``y`` and variance ``var_y`` (layout,) of ``fill``'s film (a filled
+    pixel is unmeasured); None where no pixel is lit and measured."""
     lit = y > 1e-6 * max(float(y.max(initial=0.0)), 1e-300)
-    found = film.layout_sample_counts()
-    if found is not None:
-        lit &= found[0] >= MIN_REPLICATES
-    elif film.fewest_replicates < MIN_REPLICATES:
+    if fill.per_position is not None:
+        lit &= fill.per_position >= MIN_REPLICATES
+    elif fill.film.fewest_replicates < MIN_REPLICATES:
         return None
     return float(np.median(np.sqrt(var_y[lit]) / y[lit])) if lit.any() else None
 
@@ -274,7 +270,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     info["adaptation_mode"] = mode
     figures = {"mean": float(np.average(values, weights=weights)), "max": float(values[weights > 0].max()),
                "log_average": log_average_luminance(values, weights=weights),
-               "median_relative_error": _median_relative_error(y_at, var_at, film)}
+               "median_relative_error": _median_relative_error(y_at, var_at, fill)}
     report = build_report(scene, result, figures, fill.shape, info, budget, integrator.efficiency_definition)
     report["polarisation"] = world.polarisation_report()
     report["hud"] = report["optics"] = None
@@ -287,7 +283,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     pending = world.accel is not None
     report["analysis"] = "pending" if pending else "not run"  # what add_analysis adds: "done"
     report["analysis_seconds"] = None
-    products = Products(fill, names, pixels, preview, report, attrs)
+    products = Products(fill, names, pixels, preview, report, attrs, y_at, var_at)
     if analyse:
         add_analysis(products, world, integrator, result)
     return products
