@@ -170,3 +170,42 @@ def test_one_pool_serves_the_renders_of_a_session(preset):
     processes = list(pool.pool._pool)
     parallel.close_shared_pool()
     assert all(p.exitcode is not None for p in processes)
+
+
+def test_a_stop_signal_that_reaches_a_closing_pools_worker_late_loses_no_batch():
+    """A stop signal to the process group reaches the workers too, and a worker inside a long C call
+    runs its handler late: after the parent, stopped by the same signal, has closed the pool. The
+    worker ended itself then (its SIGTERM meant "the end" once the pool was closing), mid-batch; the
+    pool started another and its join waited forever for the lost batch (3 in 25 group SIGTERMs
+    mid-render hung). A closing pool's workers now finish their batches and end on the pool's
+    sentinel: the same processes, every batch's result, and the join returns."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from tracer.runtime.parallel import WorkerPool
+
+    pool = WorkerPool(2)
+    try:
+        deadline = time.monotonic() + 120
+        while pool.poll_ready() < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert pool.ready == 2
+        pids = {p.pid for p in pool.pool._pool}
+        pool.used = True
+        batches = [pool.pool.apply_async(time.sleep, (1.0,)) for _ in range(4)]  # two each, in a C call
+        time.sleep(0.3)
+        pool.close(wait=False)
+        for pid in pids:  # the group's signal, landing after the close
+            os.kill(pid, signal.SIGTERM)
+        joined = threading.Thread(target=pool.pool.join, daemon=True)
+        joined.start()
+        joined.join(timeout=30)
+        assert not joined.is_alive(), "the closing pool's join hung: a batch was lost"
+        assert all(b.ready() and b.successful() for b in batches)
+        assert {p.pid for p in pool.pool._pool} <= pids  # no worker was replaced
+    finally:
+        for p in pool.pool._pool:
+            if p.exitcode is None:
+                p.kill()

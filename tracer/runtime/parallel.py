@@ -263,9 +263,15 @@ class WorkerPool:
         error, an abort; a pool never used) terminate them. Pool.terminate() after batches were handed
         out can hang in CPython's task handler (waiting for the inqueue's lock, never released), so a
         pool in use is closed and joined. ``wait`` false: the workers exit on their own while this
-        process goes on (:func:`close_shared_pool` joins them later)."""
-        self.ending.set()  # the workers' SIGTERM ends them again
+        process goes on (:func:`close_shared_pool` joins them later).
+
+        ``ending`` (the workers' SIGTERM ends them again) is set only to terminate: a closed pool's
+        workers end on the pool's own sentinel after their batches. Set on close too, a stop signal
+        to the process group that reached a worker inside a long C call (Embree, numpy) ran its handler
+        after the parent had closed the pool: the worker exited mid-batch, the pool started another,
+        and the join waited forever for the lost batch (3 in 25 group SIGTERMs mid-render)."""
         if terminate or not self.used:
+            self.ending.set()
             self.pool.terminate()
         else:
             self.pool.close()
