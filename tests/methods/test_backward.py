@@ -192,3 +192,52 @@ def test_specular_splits_move_noise_not_answer(tmp_path):
         m, se[splits] = region_mean(y, res.film.variance_y(), np.ones(y.shape, bool))
         assert abs(m - expected) < z_bound(2) * se[splits], (splits, m, expected, se[splits])
     assert se[3] < 0.3 * se[0]
+
+
+def _plate_at_60(folder, rows: int):
+    """Issue 31's hand-built scene: a 1000 cd/m^2 panel seen via a 45-degree mirror (R 0.85) through a
+    10 mm plate (n 1.5) whose normal is 60 deg from the gaze, so that the incidence runs from about 71
+    deg at the top row to 49 deg at the bottom; an aperture at the eye's image aims the panel."""
+    from presets._build import disk
+
+    sb = SceneBuilder(folder, "plate-at-60", "a panel through a 10 mm plate at 60 deg, via a mirror")
+    n = np.array([0.0, -math.cos(math.radians(60)), math.sin(math.radians(60))])
+    sb.add("plate", box(200, 240, 10), {"type": "dielectric", "ior": 1.5}, frame_matrix([0, 120, 0], [1, 0, 0], n))
+    centre, normal = np.array([0.0, 300.0, 0.0]), np.array([0.0, -1.0, -1.0]) / math.sqrt(2)
+    sb.add("mirror", rectangle(200, 200), {"type": "mirror", "reflectance": 0.85},
+           frame_matrix(centre, [1, 0, 0], normal))
+    image = -2 * ((-centre) @ normal) * normal
+    sb.add("pupil_image", disk(20, 64), {"type": "aperture"}, frame_matrix(image, [1, 0, 0], [0, 0, -1]))
+    sb.add("panel", rectangle(200, 200), {"type": "absorber"}, frame_matrix([0, 300, -300], [1, 0, 0], [0, 0, 1]),
+           emission={"luminance": 1000.0, "aim": {"target": "pupil_image", "share": 0.9}})
+    return sb.write(eye={"position": [0, 0, 0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 4.0,
+                         "focal_length_mm": 16.67, "accommodation_distance_mm": 600.0, "resolution": [8, rows],
+                         "fov_deg": [5.0, 22.5]}), n
+
+
+def test_a_plates_exit_surface_splits_at_every_angle_so_the_error_has_no_step(tmp_path):
+    """Issue 31's noise step: the per-pixel error of a panel seen through a plate at 60 deg jumped from
+    0.5 to 8.5 and 20 cd/m^2 between adjacent rows of the same mean. The split rule compared the
+    branches' radiance weights (T/n^2 into glass, n^2 T out of it), so the exit surface split only
+    above 63.1 deg of incidence. Now the shares are the flux's: every row's mean is the closed form
+    (L R_mirror times the plate's incoherent transmittance, averaged over s and p), within its error
+    (alpha 0.01, Sidak over the rows), and no row's error is more than 1.5 times its neighbour's
+    (before: 17 times across the 63.1-deg row)."""
+    from tests.support.optics import fresnel_angles
+
+    rows = 48
+    folder, normal = _plate_at_60(tmp_path / "p", rows)
+    y, var, res = render(folder, "backward", 1_000_000, seed=2)
+    world = World(load_scene(folder))
+    eye = world.eye
+    inner = slice(6, rows - 6)  # away from the mirror's edges (rows 2 and 43)
+    means = y[inner].mean(axis=1)
+    errors = np.sqrt(var[inner].sum(axis=1)) / y.shape[1]
+    _, sy = eye.pixel_centers()
+    d = eye.gaze[:, None] + (sy[inner] / eye.focal)[None, :] * eye.up[:, None]
+    theta = np.degrees(np.arccos(np.abs(normal @ d) / np.linalg.norm(d, axis=0)))
+    expected = [1000.0 * 0.85 * np.mean([(1 - r) / (1 + r) for r in fresnel_angles(t, 1.5)]) for t in theta]
+    assert theta.min() < 60 < 66 < theta.max()  # the rows straddle the old rule's 63.1 deg
+    z = np.abs(means - expected) / errors
+    assert z.max() < z_bound(len(z)), (z.max(), means, expected, errors)
+    assert np.all(errors[1:] < 1.5 * errors[:-1]) and np.all(errors[:-1] < 1.5 * errors[1:]), errors
