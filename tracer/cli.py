@@ -411,7 +411,8 @@ def cmd_false_colour(args) -> int:
 
 
 #: The eyebox scan's arguments and the command line's flags for them.
-EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field", "threshold": "--threshold"}
+EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field", "threshold": "--threshold",
+                "photons": "--photons"}
 
 
 def cmd_eyebox(args) -> int:
@@ -422,7 +423,7 @@ def cmd_eyebox(args) -> int:
     from .transport.world import World
 
     try:
-        check_scan(args.half, args.step, args.field, args.threshold)
+        check_scan(args.half, args.step, args.field, args.threshold, args.photons)
     except ScanArgumentError as e:
         print(f"error: {EYEBOX_FLAGS[e.argument]}: {e.message}", file=sys.stderr)
         return EXIT_INPUT
@@ -436,7 +437,8 @@ def cmd_eyebox(args) -> int:
             scene = load_scene(_resolve_scene(args.scene, Path(tmp)), allow_external=args.allow_external_files)
             outputs = OutputSet(args.out, OUTPUT_NAMES, scene_root=scene.root).open()  # before the first ray
             try:
-                result = eyebox_scan(World(scene), args.half, args.step, args.field, args.threshold, progress=bar)
+                result = eyebox_scan(World(scene), args.half, args.step, args.field, args.threshold, progress=bar,
+                                     photons=args.photons, seed=args.seed)
                 outputs.commit(output_files(result))
                 outputs.keep()
             finally:
@@ -714,9 +716,14 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--step", type=float, default=5.0, metavar="S", help="grid step, mm (default 5)")
     y.add_argument("--field", type=float, nargs=2, default=None, metavar=("FX", "FY"),
                    help="display field, full width and height, deg, centred on the gaze (default: found from the "
-                        "scene, where the eye sees an LCD through the optics)")
+                        "scene, where the eye sees an LCD through the optics, or a lit screen)")
     y.add_argument("--threshold", type=float, default=0.5, metavar="T",
                    help="share of its design-eye luminance every field point keeps inside the eyebox (default 0.5)")
+    y.add_argument("--photons", type=int, default=1_000_000, metavar="N",
+                   help="particles of the photon map that lights a screen seen through optics (a rear-projection "
+                        "HUD; about 5 s per million), used only where a scattering surface is lit through a lens "
+                        "or mirror (default 1000000; 0: leave that light out)")
+    y.add_argument("--seed", type=int, default=0, help="random seed of the photon map (default 0)")
     y.add_argument("--quiet", action="store_true", help="no progress bar")
     y.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder")

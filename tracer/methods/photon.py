@@ -42,10 +42,12 @@ surface after a bounce is not counted (a warning says so where the environment i
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.film import Splats
+from ..core.sampling import make_rng
 from ..core.units import luminance3
 from ..core.vec import F32, dot, take
 from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
@@ -181,6 +183,61 @@ class PhotonGrid:
         return pt[ok], ph[ok]
 
 
+@dataclass
+class Gathered:
+    """What the photons of a :class:`PhotonGrid` within its radius of m points send toward them (each
+    point's outgoing direction is its interaction's): ``sums`` (3, m) the sums of f Phi_p over the
+    photons (f the surface's BSDF, 1/sr; Phi_p the photon's flux, cd/m^2 mm^2 sr), ``found`` (m,) the
+    photons gathered, ``squares`` (m,) the sums of Y(f Phi_p)^2 (the density estimate's variance, see
+    :meth:`PhotonMap.luminance`), ``pairs`` all of them, and ``flux`` the luminance of the gathered
+    photons' flux summed per chunk of pairs (the photon method's roulette scale)."""
+
+    sums: np.ndarray
+    found: np.ndarray
+    squares: np.ndarray
+    pairs: int
+    flux: list[float]
+
+
+def gather(grid: PhotonGrid, it: Interaction, bsdf, rep: np.ndarray, squares: bool = False) -> Gathered:
+    """Gather ``grid``'s photons at the points of ``it`` (replicates ``rep``) on surfaces of ``bsdf``:
+    photons of the same replicate and object within the radius whose normals agree
+    (:meth:`PhotonGrid.pairs`), at most GATHER_PAIRS candidate pairs at a time. Dividing ``sums`` by pi
+    r^2 N (N the particles emitted for the replicate) gives the luminance (Jensen 2001, eq. 7.6).
+    ``squares`` false leaves :attr:`Gathered.squares` at 0 (the photon method's error bars come from
+    its replicates)."""
+    m = len(it)
+    cells, lo, hi = grid.candidates(it.p, rep)
+    per_point = np.cumsum((hi - lo).sum(axis=1))
+    out = Gathered(np.zeros((3, m)), np.zeros(m, np.int64), np.zeros(m), 0, [])
+    start = 0
+    while start < m:
+        done = per_point[start - 1] if start else 0
+        end = int(np.searchsorted(per_point, done + GATHER_PAIRS, side="right"))
+        end = min(max(end, start + 1), m)
+        sl = slice(start, end)
+        pt, ph = grid.pairs(it.p[:, sl], it.ng[:, sl], it.slot[sl], rep[sl], cells[:, sl], lo[sl], hi[sl])
+        start = end
+        if len(pt) == 0:
+            continue
+        pt = pt + sl.start
+        out.pairs += len(pt)
+        sub = it.take(pt)
+        d_ph = grid.d[:, ph]
+        cos = np.abs(dot(d_ph, sub.ng))
+        fcos = bsdf.eval(sub, -d_ph, RADIANCE)
+        f = np.divide(fcos, cos, out=np.zeros(fcos.shape, np.float64), where=cos > 0)
+        flux = grid.beta[:, ph]
+        contrib = f * flux
+        for c in range(3):
+            out.sums[c] += np.bincount(pt, weights=contrib[c], minlength=m)
+        out.found += np.bincount(pt, minlength=m)
+        if squares:
+            out.squares += np.bincount(pt, weights=luminance3(contrib) ** 2, minlength=m)
+        out.flux.append(float(luminance3(flux).sum()))
+    return out
+
+
 class PhotonPass(PathMethod):
     """The photon pass's hooks on the path loop: particles carry flux (IMPORTANCE), and every
     non-specular vertex they reach stores a photon (after the particle's first event, or from its
@@ -230,6 +287,102 @@ class PhotonPass(PathMethod):
         out = continue_by_sampling(state, it, self.particles.sampler(bsdf), ctx, IMPORTANCE, nxt, sl)
         nxt.extra["scattered"][sl] = True
         return out
+
+
+#: A :class:`PhotonMap` of MAP_PHOTONS particles gathers about MAP_GATHER photons at a photon of
+#: its median density; the count grows as the square root of the particles, so that the relative
+#: error and the radius (the blur) both fall as N^(-1/4).
+MAP_GATHER = 400
+MAP_PHOTONS = 1_000_000
+#: A :class:`PhotonMap`'s radius is at most this share of the extent of the photons on their surface.
+MAP_MAX_RADIUS_SHARE = 0.05
+#: Photons whose neighbours are counted to set a :class:`PhotonMap`'s radius.
+MAP_RADIUS_PROBES = 2000
+
+
+class PhotonMap:
+    """The photon method's photon pass run once, and its photons kept for any number of look-ups: the
+    light that reaches scattering surfaces through other surfaces (a projection lens, a condenser, a
+    mirror: the paper's sec. 4.1 screen, lit by the LEDs through the LCD and the projection lens), as
+    its luminance toward a given direction at given points (:meth:`luminance`). It serves the
+    brightness-theorem analysis (:func:`tracer.transport.chains.specular_paths`), whose quadrature
+    follows only the light that reaches a scattering surface straight from an emitter: what the
+    photons carry complements it exactly, as the photon method's "photon" and "connection" components
+    do (photons are stored after their first event only). One map serves every eye position of an
+    eyebox scan (:mod:`tracer.scans.eyebox`): the photons do not depend on the eye, and the scan's
+    values share their random numbers, so their ratios to the design eye are far less noisy than each.
+
+    ``photons`` particles leave the lights (with their aims, :class:`tracer.methods.forward.Particles`)
+    on the random stream ``seed``; no Russian roulette. The gather radius ``radius_mm`` is set so
+    that a photon at the median density gathers about ``gather`` = MAP_GATHER sqrt(photons /
+    MAP_PHOTONS) of its neighbours (at most :data:`MAP_MAX_RADIUS_SHARE` of the photons' extent): a
+    relative standard error of some 5 % at a million particles, and a blur of the order of the
+    radius (:meth:`luminance` gives each value's standard error). Raises nothing where no photon is
+    stored (a scene whose lights reach no scattering surface through optics): every look-up then
+    gives 0."""
+
+    def __init__(self, world, photons: int, seed: int, max_depth: int = 12, progress=None):
+        self.world = world
+        self.emitted = int(photons)
+        self.seed = int(seed)
+        self.gather = MAP_GATHER * math.sqrt(max(self.emitted, 1) / MAP_PHOTONS)
+        can_emit = world.accel is not None and world.lights.total_flux_lm > 0
+        stored: list[tuple] = []
+        if can_emit and photons > 0:
+            particles = Particles(world)
+            pp = PhotonPass(particles, store_direct=False)
+            ctx = Context(world, make_rng(seed, 1), Timers(), Splats())
+            for a in range(0, photons, WAVE):
+                state, _ = particles.emit(ctx.rng, min(WAVE, photons - a), a, 1)
+                state.extra["scattered"] = np.zeros(len(state), bool)
+                trace(pp, state, ctx, max_depth, probe=False)
+                if progress is not None:
+                    progress(min(a + WAVE, photons) / photons)
+            stored = pp.stored
+        self.stored = sum(len(part[3]) for part in stored)
+        self.radius_mm = 0.0
+        self.grid: PhotonGrid | None = None
+        if self.stored:
+            arrays = [np.concatenate(parts, axis=-1) for parts in zip(*stored, strict=True)]
+            arrays[5] = np.zeros(self.stored, np.int64)  # one replicate
+            self.radius_mm = self._radius(arrays)
+            self.grid = PhotonGrid(*arrays, self.radius_mm)
+
+    def _radius(self, arrays) -> float:
+        """The radius (mm) at which a photon at the median density has about ``gather`` neighbours: a
+        first guess from the photons' extent, then corrected twice by the neighbours counted at
+        MAP_RADIUS_PROBES photons (the count grows as the radius squared on a surface)."""
+        p, _, _, slot, ng, rep = arrays
+        extent = float(np.max(p.max(axis=1) - p.min(axis=1)))
+        largest = max(MAP_MAX_RADIUS_SHARE * extent, 1e-6)
+        radius = min(largest, extent * math.sqrt(self.gather / (math.pi * self.stored)) or largest)
+        probe = np.linspace(0, self.stored - 1, min(MAP_RADIUS_PROBES, self.stored)).astype(np.int64)
+        for _ in range(2):
+            grid = PhotonGrid(*arrays, radius)
+            x, n_, s_, r_ = p[:, probe], ng[:, probe], slot[probe], rep[probe]
+            cells, lo, hi = grid.candidates(x, r_)
+            pt, _ = grid.pairs(x, n_, s_, r_, cells, lo, hi)
+            median = float(np.median(np.bincount(pt, minlength=len(probe))))
+            radius = min(largest, radius * math.sqrt(self.gather / max(median, 1.0)))
+        return radius
+
+    def luminance(self, it: Interaction, bsdf) -> tuple[np.ndarray, np.ndarray]:
+        """At the points of ``it`` (on surfaces of ``bsdf``, looked at from ``it``'s outgoing
+        direction): (the luminance of the light the photons bring (3, m), cd/m^2; its standard error
+        (m,), Y cd/m^2). The density estimate L = sum_p f Phi_p / (pi r^2 N) (Jensen 2001, eq. 7.6);
+        the photons gathered are a Poisson sample of the photon paths, so its variance is
+        sum_p Y(f Phi_p)^2 / (pi r^2 N)^2 (the radius' bias, a blur over r, is not in it)."""
+        m = len(it)
+        if self.grid is None or m == 0:
+            return np.zeros((3, m)), np.zeros(m)
+        g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True)
+        scale = 1.0 / (math.pi * self.radius_mm ** 2 * self.emitted)
+        return g.sums * scale, np.sqrt(g.squares) * scale
+
+    def summary(self) -> dict:
+        """What the map is, for a result's JSON."""
+        return {"photons_emitted": self.emitted, "photons_stored": self.stored, "radius_mm": self.radius_mm,
+                "target_photons_per_gather": self.gather, "seed": self.seed}
 
 
 @register
@@ -426,41 +579,16 @@ class PhotonTracer(BackwardTracer):
         for entry in vis:
             by_material.setdefault(id(entry[5]), []).append(entry)
         for entries in by_material.values():
-            bsdf = entries[0][5]
             it = Interaction.concat([e[0] for e in entries])
             beta = np.concatenate([e[1] for e in entries], axis=1)
             owner, rep, sample = (np.concatenate([e[k] for e in entries]) for k in (2, 3, 4))
-            cells, lo, hi = grid.candidates(it.p, rep)
-            per_point = np.cumsum((hi - lo).sum(axis=1))
-            gathered = np.zeros((3, len(it)))
-            per_point_found = np.zeros(len(it), np.int64)
-            start, gathered_pairs = 0, 0
-            while start < len(it):
-                done = per_point[start - 1] if start else 0
-                end = int(np.searchsorted(per_point, done + GATHER_PAIRS, side="right"))
-                end = min(max(end, start + 1), len(it))
-                sl = slice(start, end)
-                pt, ph = grid.pairs(it.p[:, sl], it.ng[:, sl], it.slot[sl], rep[sl], cells[:, sl], lo[sl], hi[sl])
-                start = end
-                if len(pt) == 0:
-                    continue
-                pt = pt + sl.start
-                gathered_pairs += len(pt)
-                sub = it.take(pt)
-                d_ph = grid.d[:, ph]
-                cos = np.abs(dot(d_ph, sub.ng))
-                fcos = bsdf.eval(sub, -d_ph, RADIANCE)
-                f = np.divide(fcos, cos, out=np.zeros(fcos.shape, np.float64), where=cos > 0)
-                flux = grid.beta[:, ph]
-                contrib = f * flux
-                for c in range(3):
-                    gathered[c] += np.bincount(pt, weights=contrib[c], minlength=len(it))
-                per_point_found += np.bincount(pt, minlength=len(it))
-                _tally(ctx, "photon_flux_gathered", float(luminance3(flux).sum()))
-            _tally(ctx, "photons_gathered", gathered_pairs)
+            g = gather(grid, it, entries[0][5], rep)
+            for flux in g.flux:
+                _tally(ctx, "photon_flux_gathered", flux)
+            _tally(ctx, "photons_gathered", g.pairs)
             if counts is not None:
-                counts.append(per_point_found)
-            value = beta * gathered / (r2pi * per_replicate[rep])
+                counts.append(g.found)
+            value = beta * g.sums / (r2pi * per_replicate[rep])
             self._add(ctx, "photon", owner, rep, sample, value)
 
     def _batch(self, ctx, pix: np.ndarray, rep: np.ndarray, replicates: int, photons: int, radius: float,

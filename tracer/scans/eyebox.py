@@ -17,11 +17,15 @@ and :mod:`tracer.transport.chains`). Only the chief ray from the pupil's centre 
 offset: the eye travels some 100 mm across an eyebox while its pupil spans 2 to 8 mm, and the
 pupil average differs from the chief ray only where a source is imaged into part of the pupil.
 
-The analysis follows light that reaches scattering surfaces directly from the emitters. Where a
-scattering surface is lit through specular optics (hud-screen's rear-projection screen behind its
-projection lens, hud-direct-condenser's scatterer behind a condenser) it cannot predict the
-display, and the result says so (``valid`` false, ``reasons``), as
-:func:`tracer.analysis.brightness.brightness_theorem` does for its sections.
+The analysis' quadrature follows light that reaches scattering surfaces directly from the emitters.
+Where a scattering surface is lit through specular optics (hud-screen's rear-projection screen
+behind its projection lens, hud-direct-condenser's scatterer behind a condenser), the scan adds a
+photon map (:class:`tracer.methods.photon.PhotonMap`, the paper's sec. 4.1 bidirectional method):
+``photons`` particles leave the lights once, and every eye offset gathers the same photons at the
+points where its chief rays land on the screen. The field is then found where the eye sees the lit
+screen, each value has a standard error (``photon_se_cd_m2``), and a map too sparse for a
+:data:`MAX_PHOTON_ERROR` relative error at the design eye is reported (``valid`` false, ``reasons``),
+as is a scene whose scattering surfaces are lit through optics and no photons are asked for.
 
 Outputs (:func:`output_files`): eyebox.csv (one row per offset), eyebox.png (:func:`eyebox_chart`)
 and eyebox.json (:meth:`EyeboxResult.summary`), written as a set (:mod:`tracer.products.outputs`).
@@ -39,6 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis.brightness import SPECULAR_SHARE, per_pixel
+from ..core.units import luminance3
+from ..methods.photon import PhotonMap
 from ..products import charts
 from ..products.outputs import OutputFile, png_file, write_as_set
 from ..products.report import finite_json
@@ -53,6 +59,17 @@ FIELD_POINTS = (("centre", 0, 0), ("upper left", -1, 1), ("upper right", 1, 1), 
 CORNER = 0.8
 #: Most eye offsets a scan may have (a typing slip in a step should not start an hour-long scan).
 MAX_OFFSETS = 20_000
+#: Particles of the photon map of a scan whose scattering surfaces are lit through specular optics.
+DEFAULT_PHOTONS = 1_000_000
+#: The most particles a photon map may have (about 5 s per million on hud-screen, 2 cores).
+MAX_PHOTONS = 100_000_000
+#: Particles of the pilot photon map that decides whether a scan needs one (:func:`_lit_through_optics`).
+PILOT_PHOTONS = 50_000
+#: The largest relative standard error of the photon map's design-eye values for a valid scan.
+MAX_PHOTON_ERROR = 0.1
+#: Where the field is found on a lit screen: the pixels whose luminance is at least this share of
+#: the 90th percentile of the lit ones (an edge halfway up the screen image's border).
+SCREEN_EDGE = 0.5
 #: Files of :func:`output_files`, in the output folder.
 OUTPUT_NAMES = ("eyebox.csv", "eyebox.png", "eyebox.json")
 
@@ -110,21 +127,34 @@ def clear_lcd(scene: Scene) -> Scene:
     return dataclasses.replace(scene, objects=[clear(o) for o in scene.objects])
 
 
-def display_field(world: World) -> Field:
+def display_field(world: World, photons=None, survey: dict | None = None) -> Field:
     """The display field from the design eye: the angular extent of the pixels whose chief rays reach
     an LCD cell along the dominant chain through an LCD (:func:`tracer.transport.chains.specular_paths` on
-    its pixel grid), each pixel counted with its whole cell of the grid, so each edge lies within
-    half a grid cell of the display's. Raises :class:`FieldNotFound` where no chief ray reaches an
-    LCD through the specular optics (no LCD, or one imaged onto a screen by a lens, as in hud-screen)."""
-    res = specular_paths(world, environment=False)
+    its pixel grid, or its result ``survey``), each pixel counted with its whole cell of the grid, so
+    each edge lies within half a grid cell of the display's. With no LCD in view, the pixels of the
+    dominant chain that ends on a scattering surface where it is lit (by the lights directly, or
+    through optics where a photon map ``photons``, a :class:`tracer.methods.photon.PhotonMap`, follows
+    them): at least :data:`SCREEN_EDGE` of the 90th percentile of its lit pixels (a rear-projection
+    screen's image). Raises :class:`FieldNotFound` where neither is found (no LCD in view and no lit
+    screen: hud-screen's screen, lit through its projection lens, without photons)."""
+    res = survey if survey is not None else specular_paths(world, environment=False, photons=photons)
+    px = None
     through_lcd = [p for p in res["paths"] if np.any(np.isfinite(p["lcd"]))]
-    if not through_lcd:
+    if through_lcd:
+        px = res["pixels"][np.unique(through_lcd[0]["pixel"])]
+    else:
+        screens = [p for p in res["paths"] if p["path"].endswith(":scatter") and np.any(p["luminance"] > 0)]
+        if screens:
+            y = luminance3(screens[0]["luminance"].T)
+            lit = y >= SCREEN_EDGE * np.percentile(y[y > 0], 90)
+            px = res["pixels"][np.unique(screens[0]["pixel"][lit])]
+    if px is None:
         ends = sorted({p["path"].split(" > ")[-1] for p in res["paths"]})
         seen = f" (they end on {', '.join(ends)})" if ends else ""
         raise FieldNotFound("the display field cannot be found from the scene: no chief ray from the eye reaches an "
-                            f"LCD cell through the specular optics{seen}; give it (field_deg, --field FX FY)")
+                            f"LCD cell through the specular optics or a lit scattering surface{seen}; give it "
+                            "(field_deg, --field FX FY)")
     eye = world.eye
-    px = res["pixels"][np.unique(through_lcd[0]["pixel"])]
     sx, sy = eye.pixel_centers()
     half_cell = 0.5 * res["stride"] * np.array([eye.pixel_w, eye.pixel_h]) / eye.focal
     a, b = sx[px % eye.width] / eye.focal, sy[px // eye.width] / eye.focal
@@ -192,6 +222,9 @@ class EyeboxResult:
     coarse_cd_m2 (ny, nx, 5): the part of ``luminance_cd_m2`` from lights closer to the scattering
     surfaces than the analysis' quadrature resolves (a backlight right behind a screen), cd/m^2.
     valid, reasons: whether the analysis can predict this scene, and why not.
+    photon_se_cd_m2 (ny, nx, 5): the standard error of each luminance where a photon map lit a
+    scattering surface (Y cd/m^2; the sum of its chains' errors, an upper bound), else None;
+    photon_map: the map's figures (:meth:`tracer.methods.photon.PhotonMap.summary`), else None.
     figures: :meth:`figures` (None when not valid).
     """
 
@@ -208,6 +241,8 @@ class EyeboxResult:
     reasons: list[str]
     specular_blockers: dict[str, list[str]]
     coarse_cd_m2: np.ndarray | None = None
+    photon_se_cd_m2: np.ndarray | None = None
+    photon_map: dict | None = None
 
     @property
     def field_points(self) -> np.ndarray:
@@ -297,8 +332,12 @@ class EyeboxResult:
         return {
             "scene": self.scene,
             "method": "brightness-theorem analysis (tracer.transport.chains): the chief ray from each eye offset to "
-                      "each field point through every specular branch, every LCD cell clear, the environment left out",
+                      "each field point through every specular branch, every LCD cell clear, the environment left out"
+                      + ("; the light that reaches scattering surfaces through other surfaces from a photon map "
+                         "(tracer.methods.photon.PhotonMap) shared by every offset" if self.photon_map else ""),
             "valid": self.valid, "reasons": self.reasons, "specular_blockers": self.specular_blockers,
+            "photon_map": None if self.photon_map is None else self.photon_map | {
+                "design_standard_error_cd_m2": self.photon_se_cd_m2[self.design_index].tolist()},
             "threshold": self.threshold,
             "field": {"from_scene": f.from_scene, "deg": f.deg.tolist(), "centre_deg": f.centre_deg.tolist(),
                       "corner_share": CORNER,
@@ -313,9 +352,11 @@ class EyeboxResult:
         }
 
 
-def check_scan(half_mm, step_mm, field_deg, threshold):
-    """Raise :class:`ScanArgumentError` naming the argument (half_mm, step_mm, field_deg, threshold)
-    that is out of its range."""
+def check_scan(half_mm, step_mm, field_deg, threshold, photons: int = DEFAULT_PHOTONS):
+    """Raise :class:`ScanArgumentError` naming the argument (half_mm, step_mm, field_deg, threshold,
+    photons) that is out of its range."""
+    if isinstance(photons, bool) or not isinstance(photons, int | np.integer) or not 0 <= photons <= MAX_PHOTONS:
+        raise ScanArgumentError("photons", f"a whole number of particles in [0, {MAX_PHOTONS:,}], got {photons!r}")
     half = np.asarray(half_mm, dtype=np.float64)
     if half.shape != (2,) or not np.all(np.isfinite(half)) or np.any(half < 0) or np.any(half > 1000):
         raise ScanArgumentError("half_mm", f"two half-widths in [0, 1000] mm, got {half_mm}")
@@ -339,7 +380,7 @@ def check_scan(half_mm, step_mm, field_deg, threshold):
 
 
 def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_deg=None, threshold: float = 0.5,
-                progress=None) -> EyeboxResult:
+                progress=None, photons: int = DEFAULT_PHOTONS, seed: int = 0) -> EyeboxResult:
     """Scan the eyebox of ``world``'s scene (see the module docstring).
 
     half_mm: (right, up) half-widths of the grid of eye offsets, mm; step_mm: its step, mm (the
@@ -347,17 +388,33 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     of the display field, deg, centred on the gaze; None finds it from the scene
     (:func:`display_field`; :class:`FieldNotFound` where it cannot be found). threshold: the share
     of the design-eye luminance every field point must keep inside the eyebox. ``progress``
-    (fraction, message), if given, is called after every row of the grid.
+    (fraction, message), if given, is called after every row of the grid (and while the photon map
+    is built). ``photons``: particles of the photon map, built (on the random stream ``seed``) only
+    where a scattering surface in view is lit through specular optics; 0 leaves that light out and
+    the scan not valid.
 
     The scan runs on a world of its own, the scene with every LCD cell clear (:func:`clear_lcd`);
     the given world is used for its scene only. Raises :class:`ScanArgumentError` naming an argument
     out of its range before tracing anything.
     """
-    check_scan(half_mm, step_mm, field_deg, threshold)
+    check_scan(half_mm, step_mm, field_deg, threshold, photons)
     scene = world.scene
     if any(o.material.type == "lcd" for o in scene.objects):
         world = World(clear_lcd(scene))
-    fld = display_field(world) if field_deg is None else Field.given(field_deg)
+    survey = specular_paths(world, environment=False)
+    pmap = None
+    if photons > 0 and _lit_through_optics(world, survey, seed):
+        share = 0.5  # of the progress: the photon map, then the grid
+
+        def built(fraction):
+            if progress is not None:
+                progress(share * fraction, f"eyebox: photon map, {int(fraction * photons)} of {photons} photons")
+
+        pmap = PhotonMap(world, photons, seed, progress=built)
+        survey = specular_paths(world, environment=False, photons=pmap)
+    else:
+        share = 0.0
+    fld = display_field(world, pmap, survey) if field_deg is None else Field.given(field_deg)
     eye = world.eye
     tangents = fld.points()
     directions = eye.gaze + tangents[:, :1] * eye.right + tangents[:, 1:] * eye.up  # (5, 3)
@@ -368,24 +425,48 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     lum = np.zeros((len(zs), len(xs), n))
     through = np.zeros_like(lum)
     coarse = np.zeros_like(lum)
+    error = np.zeros_like(lum)
     blockers: dict[str, set] = {}
     for j, z in enumerate(zs):
         for i, x in enumerate(xs):
             # The moved eye's rays are given directions: it needs no retina (1 x 1 spares the pixel table).
             moved = dataclasses.replace(eye.spec, position=eye.position + x * eye.right + z * eye.up, resolution=(1, 1))
             d = points - moved.position if points is not None else directions
-            res = specular_paths(world.with_eye(moved), directions=d, environment=False)
+            res = specular_paths(world.with_eye(moved), directions=d, environment=False, photons=pmap)
             lum[j, i], _, through[j, i], coarse[j, i] = per_pixel(res["paths"], n)
+            for path in res["paths"]:
+                np.add.at(error[j, i], path["pixel"], path["photon_se"])
             for k, v in res["specular_blockers"].items():
                 blockers.setdefault(k, set()).update(v)
         if progress is not None:
-            progress((j + 1) / len(zs), f"eyebox: {(j + 1) * len(xs)} of {len(zs) * len(xs)} eye offsets")
+            progress(share + (1 - share) * (j + 1) / len(zs),
+                     f"eyebox: {(j + 1) * len(xs)} of {len(zs) * len(xs)} eye offsets")
     design = lum[int(np.argmin(np.abs(zs))), int(np.argmin(np.abs(xs)))].copy()
     result = EyeboxResult(scene.name, xs, zs, float(step_mm), fld, float(threshold), lum, through, design, True, [],
-                          {k: sorted(v) for k, v in sorted(blockers.items())}, coarse)
+                          {k: sorted(v) for k, v in sorted(blockers.items())}, coarse,
+                          error if pmap is not None else None, pmap.summary() if pmap is not None else None)
     result.reasons = _reasons(result)
     result.valid = not result.reasons
     return result
+
+
+def _lit_through_optics(world: World, survey: dict, seed: int) -> bool:
+    """Whether scattering surfaces that chief rays of the ``survey`` (:func:`specular_paths` at the
+    design eye) end on receive more than SPECULAR_SHARE of their light through other surfaces, which
+    the quadrature does not follow: where a specular surface blocks their direct view of a light (the
+    quadrature names it), or else where a pilot photon map of :data:`PILOT_PHOTONS` finds such light
+    (a screen lit by a mirror whose direct view of the light is blocked by an absorber)."""
+    n = len(survey["pixels"])
+    lum, _, through, _ = per_pixel(survey["paths"], n)
+    if np.any(through > SPECULAR_SHARE * (lum + through)):
+        return True
+    if not any(p["path"].endswith(":scatter") for p in survey["paths"]):
+        return False
+    pilot = PhotonMap(world, PILOT_PHOTONS, seed)
+    if pilot.grid is None:
+        return False
+    with_photons, _, _, _ = per_pixel(specular_paths(world, environment=False, photons=pilot)["paths"], n)
+    return bool(np.any(with_photons - lum > SPECULAR_SHARE * with_photons))
 
 
 def _reasons(r: EyeboxResult) -> list[str]:
@@ -399,7 +480,17 @@ def _reasons(r: EyeboxResult) -> list[str]:
         reasons.append(f"scattering surfaces are lit through specular optics the analysis does not follow: {lit}; at "
                        f"{int(unfollowed.any(axis=2).sum())} of {unfollowed.shape[0] * unfollowed.shape[1]} eye "
                        f"offsets; at the design eye direct light would add {through[j, i].max():.4g} cd/m^2 to the "
-                       f"{lum[j, i][np.argmax(through[j, i])]:.4g} predicted")
+                       f"{lum[j, i][np.argmax(through[j, i])]:.4g} predicted (--photons above 0 follows it with a "
+                       "photon map)")
+    if r.photon_se_cd_m2 is not None:
+        j, i = r.design_index
+        d, se = r.design_cd_m2, r.photon_se_cd_m2[j, i]
+        rel = np.divide(se, d, out=np.full(d.shape, np.inf), where=d > 0)
+        if np.any((rel > MAX_PHOTON_ERROR) & (d > 0)):
+            k = int(np.argmax(np.where(d > 0, rel, 0)))
+            reasons.append(f"the photon map is too sparse: the design eye's {FIELD_POINTS[k][0]} field point reads "
+                           f"{d[k]:.4g} +- {se[k]:.2g} cd/m^2 ({100 * rel[k]:.0f} %, more than "
+                           f"{100 * MAX_PHOTON_ERROR:g} %); give more photons (--photons)")
     if r.coarse_cd_m2 is not None:
         rough = r.coarse_cd_m2 > SPECULAR_SHARE * lum
         if rough.any():

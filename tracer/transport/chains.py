@@ -93,9 +93,11 @@ class ChiefRays(PathMethod):
 
     mode = RADIANCE
 
-    def __init__(self, world, level: int = 4, environment: bool = True):
+    def __init__(self, world, level: int = 4, environment: bool = True, photons=None):
         self.world = world
         self.environment = environment
+        #: Light through other surfaces at scattering surfaces (a tracer.methods.photon.PhotonMap), or None.
+        self.photons = photons
         self.quad = world.lights.quadrature(quadrature_levels(world, level)) if len(world.lights) else None
         #: Scattering object name -> names of the specular objects that block its direct view of a light.
         self.specular_blockers: dict[str, set[str]] = defaultdict(set)
@@ -132,17 +134,18 @@ class ChiefRays(PathMethod):
         return [objs[s].name + suffix for s in uniq.tolist()], inverse.reshape(-1)
 
     def _leaf(self, state: PathState, labels: list[str], which: np.ndarray | None, value: np.ndarray,
-              through_specular: np.ndarray | None = None, coarse: np.ndarray | None = None):
+              through_specular: np.ndarray | None = None, coarse: np.ndarray | None = None,
+              photon_se: np.ndarray | None = None):
         codes = self._code(state.extra["sig"], labels, which)
         factor = luminance3(state.beta)
-        if through_specular is None:
-            through_specular = np.zeros(len(state))
-        if coarse is None:
-            coarse = np.zeros(len(state))
+        zero = np.zeros(len(state))
+        through_specular = zero if through_specular is None else through_specular
+        coarse = zero if coarse is None else coarse
+        photon_se = zero if photon_se is None else photon_se
         for c in np.unique(codes):
             k = codes == c
             self.leaves[int(c)].append((state.owner[k], value[:, k].T, factor[k], state.extra["lcd"][k],
-                                        through_specular[k], coarse[k]))
+                                        through_specular[k], coarse[k], photon_se[k]))
 
     def escaped(self, state, ctx):
         env = self.world.environment
@@ -165,7 +168,10 @@ class ChiefRays(PathMethod):
         specular surface, the light that point would give unblocked is tallied (Y, cd/m^2, times the
         chain's factor) as ``through_specular``, and the blocker is named in ``specular_blockers``.
         The light of pairs whose quadrature cell is too large for their distance (:data:`QUAD_TRUST`)
-        is in the prediction and also tallied (Y, cd/m^2) as ``coarse``."""
+        is in the prediction and also tallied (Y, cd/m^2) as ``coarse``. With a photon map
+        (``photons``) the light that reaches the surface through other surfaces is its density
+        estimate (its standard error tallied as ``photon_se``, Y cd/m^2), and the lights' light is
+        all followed: ``through_specular`` keeps only the environment's (the blockers are still named)."""
         m = len(state)
         out = np.zeros((3, m))
         through = np.zeros(m)
@@ -201,12 +207,18 @@ class ChiefRays(PathMethod):
                 rough = np.flatnonzero(qh[kk] > QUAD_TRUST * dist)
                 if len(rough):
                     np.add.at(coarse, ii[rough], luminance3(take(contrib, rough)))
+        photon_se = None
+        if self.photons is not None:  # the lights' light through optics, followed (the environment's is not)
+            value, photon_se = self.photons.luminance(it, bsdf)
+            out += value
+            through[:] = 0.0
         env = self.world.environment
         if self.environment and not env.is_black:
             out += self._environment_light(it, bsdf, ctx.rng, through)
         self.ends.append(("material", it.slot, it.p, -state.d, luminance3(state.beta)))  # lit or not (a screen)
         factor = luminance3(state.beta)
-        self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, factor * through, factor * coarse)
+        self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, factor * through, factor * coarse,
+                   None if photon_se is None else factor * photon_se)
         return None
 
     def _specular_first(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -297,7 +309,8 @@ class ChiefRays(PathMethod):
 
 
 def specular_paths(world, stride: int | None = None, max_depth: int = 12, directions: np.ndarray | None = None,
-                   pixels: np.ndarray | None = None, pupil_grid: int = 0, environment: bool = True, seed: int = 0):
+                   pixels: np.ndarray | None = None, pupil_grid: int = 0, environment: bool = True, seed: int = 0,
+                   photons=None):
     """Follow chief rays of a pixel grid (or along given world ``directions`` (p, 3) from the pupil
     centre, or of the given flat ``pixels``) through all specular branches.
 
@@ -305,7 +318,9 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     points stratified over the pupil disk and uniform over the pixel's area (random by ``seed``), and
     each ray's luminance is divided by n^2, so that the sum over a pixel's rays is its average over
     the pupil and the pixel: the pixel's luminance where its rays see different things (paper eq. 2).
-    ``environment`` False leaves the environment out (for methods that do not render it).
+    ``environment`` False leaves the environment out (for methods that do not render it). ``photons``
+    (a :class:`tracer.methods.photon.PhotonMap`, or None) adds the light that reaches scattering
+    surfaces through other surfaces (a projection lens), which the quadrature does not follow.
 
     Returns a dict with ``pixels`` (p,) flat indices analysed (or 0..p-1 for given directions),
     ``stride``, ``grid``, ``pupil_samples`` (n^2, or 1 for chief rays), ``specular_blockers``
@@ -314,7 +329,8 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     "factor" (k,) Y of the product of R and T, "lcd" (k,) the first LCD's transmittance relative to
     a clear cell, NaN if none, "through_specular" (k,) Y cd/m^2 a scattering leaf would add were its
     specular blockers clear, "coarse" (k,) Y cd/m^2 of the predicted luminance that comes from lights
-    closer than the quadrature resolves (:data:`QUAD_TRUST`), "ray" (k,) the ray's index: pixel
+    closer than the quadrature resolves (:data:`QUAD_TRUST`), "photon_se" (k,) Y cd/m^2 the standard
+    error of the photon map's part of "luminance" (0 without one), "ray" (k,) the ray's index: pixel
     position * n^2 + sample}.
     """
     eye = world.eye
@@ -353,7 +369,7 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         o, d, _ = eye.generate_rays(rx, ry, lens if lens is not None else np.zeros((2, len(px))))
     samples = pupil_grid * pupil_grid if lens is not None else 1
     n = d.shape[1]
-    method = ChiefRays(world, environment=environment)
+    method = ChiefRays(world, environment=environment, photons=photons)
     beta = np.ones((3, n), F32)
     extra = {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)}
     if world.polar is not None:  # the eye's detector row (and analyser): s and p followed separately
@@ -371,8 +387,10 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         lc = np.concatenate([p[3] for p in parts])
         thr = np.concatenate([p[4] for p in parts]) / samples
         rough = np.concatenate([p[5] for p in parts]) / samples
+        se = np.concatenate([p[6] for p in parts]) / samples
         paths.append({"path": " > ".join(method.names[s]), "pixel": own, "luminance": lum, "factor": fac, "lcd": lc,
-                      "through_specular": thr, "coarse": rough, "ray": np.concatenate([p[0] for p in parts])})
+                      "through_specular": thr, "coarse": rough, "photon_se": se,
+                      "ray": np.concatenate([p[0] for p in parts])})
     paths.sort(key=lambda p: -float(luminance3(p["luminance"].T).sum()))
     return {"pixels": pixels, "stride": stride, "grid": jj.shape, "paths": paths, "pupil_samples": samples,
             "specular_blockers": {k: sorted(v) for k, v in method.specular_blockers.items()},
