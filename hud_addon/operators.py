@@ -313,7 +313,8 @@ class HUD_OT_show_false_colour(bpy.types.Operator):
 class HUD_OT_eyebox_sweep(bpy.types.Operator):
     """Sweep the eye over a grid of positions around the camera and find the eyebox: where every point of
     the display (its centre and corners, every LCD cell clear) keeps the threshold share of its luminance
-    at the camera (brightness-theorem analysis, no noise). Writes eyebox.csv, eyebox.png and eyebox.json"""
+    at the camera (brightness-theorem analysis; a photon map where a screen is lit through optics). Writes
+    eyebox.csv, eyebox.png and eyebox.json"""
 
     bl_idname = "hud.eyebox_sweep"
     bl_label = "Eyebox Sweep"
@@ -335,7 +336,8 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
                 outputs = OutputSet(folder, EYEBOX_FILES).open()  # checked and locked before the sweep
                 try:
                     result = eyebox_scan(world, half, s.eyebox_step_mm, field, s.eyebox_threshold,
-                                         progress=lambda f, _m: wm.progress_update(f))
+                                         progress=lambda f, _m: wm.progress_update(f), photons=s.eyebox_photons,
+                                         seed=s.seed)
                     outputs.commit(eyebox_files(result))
                     outputs.keep()
                 finally:
@@ -357,7 +359,8 @@ class HUD_OT_eyebox_sweep(bpy.types.Operator):
         chart.reload()
         f = summary["figures"]
         if not result.valid:
-            self.report({"WARNING"}, f"Eyebox Sweep: not valid: {'; '.join(result.reasons)}")
+            reasons = "; ".join(result.reasons).replace("--photons", "Photons")  # the panel's word for it
+            self.report({"WARNING"}, f"Eyebox Sweep: not valid: {reasons}")
         else:
             self.report({"INFO"}, f"eyebox {f['width_mm']:.1f} x {f['height_mm']:.1f} mm, uniformity "
                                   f"{f['uniformity']['eyebox']:.2f}; written to {folder}")

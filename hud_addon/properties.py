@@ -111,13 +111,18 @@ def _scene_annotations() -> dict:
                                           description="Share of its luminance at the design eye that every point "
                                                       "of the display must keep inside the eyebox"),
         "eyebox_field": EnumProperty(name="Display field", items=[
-            ("AUTO", "From the scene", "The angular extent of what the camera sees of the LCD"),
+            ("AUTO", "From the scene", "The angular extent of what the camera sees of the LCD, or of a lit screen"),
             ("GIVEN", "Given", "A field of view centred on the camera's axis")], default="AUTO",
             description="The display field whose centre and corners are checked"),
         "eyebox_field_deg": FloatVectorProperty(name="Field", size=2, default=(6.0, 2.0), min=0.01, max=179.0,
                                                 description="Full width and height of the display field, degrees"),
         "eyebox_field_deg_shown": angle_twin("eyebox_field_deg", "Field",
                                              "Full width and height of the display field", size=2),
+        "eyebox_photons": IntProperty(name="Photons", default=1_000_000, min=0, max=100_000_000,
+                                      description="Particles of the photon map that lights a screen seen through "
+                                                  "optics (a rear-projection HUD: about 5 s per million), used only "
+                                                  "where a screen is lit through a lens or mirror; 0 leaves that "
+                                                  "light out"),
         "eyebox_folder": StringProperty(name="Folder", default="//eyebox/", subtype="DIR_PATH",
                                         description="Where eyebox.csv, eyebox.png and eyebox.json are written "
                                                     "(// is the .blend's folder)"),

@@ -239,15 +239,23 @@ def export(owner, fields, prefix: str = "", alternatives=(), save_image=None) ->
 
 def apply(owner, fields, spec: dict, prefix: str = "", alternatives=(), root: Path | None = None, objects=None):
     """Set a block's properties from its scene.json form ``spec`` (what "Add HUD Preset" builds).
-    Images are loaded from ``root`` and packed; object references are looked up in ``objects``."""
+    Images are loaded from ``root`` and packed; object references are looked up in ``objects``.
+
+    A field the block does not give takes its own default where it has one: materials share their
+    properties by name, so the property may hold another material's default (hud-screen's screen, a
+    Lambertian transmitter without a reflectance, kept the Lambertian reflector's, and its export was
+    refused: reflectance + transmittance above 1)."""
     if alternatives:
         for alt in alternatives:
             if any(k in spec for k in alt):
                 setattr(owner, f"{prefix}by", alt[0])
     for f in fields:
-        if f.name not in spec:
+        if f.name in spec:
+            value = spec[f.name]
+        elif f.kind not in ("group", "image", "object_ref") and f.default not in (REQUIRED, None):
+            value = f.default
+        else:
             continue
-        value = spec[f.name]
         name = prefix + f.name
         if f.kind == "group":
             if value is None:  # an optional group given as null: not given

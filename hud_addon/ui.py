@@ -100,7 +100,7 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
         box.label(text="Eyebox")
         s = scene.hud
         for name in ("eyebox_half_width_mm_shown", "eyebox_half_height_mm_shown", "eyebox_step_mm_shown",
-                     "eyebox_threshold", "eyebox_field"):
+                     "eyebox_threshold", "eyebox_field", "eyebox_photons"):
             box.prop(s, name)
         if s.eyebox_field == "GIVEN":
             box.prop(s, "eyebox_field_deg_shown")

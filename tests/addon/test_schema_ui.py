@@ -318,3 +318,53 @@ def test_a_factor_is_a_number_and_a_lamp_is_one_button(tmp_path):
     assert lamp.emission.luminance == pytest.approx(4000.0) and lamp.area_mm2 == pytest.approx(80.0 * 40.0, rel=1e-6)
     mirror = next(o for o in scene.raw["objects"] if o["name"] == "mirror")
     assert np.allclose(mirror["material"]["reflectance"], 0.5)
+
+
+def scenario_every_preset(out):
+    """Every preset added with Add HUD Preset (into a fresh file each) and exported again."""
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    export_mod = sys.modules[f"{module}.hud_addon.export"]
+    presets = sys.modules[f"{module}.presets"].PRESETS
+    refused = {}
+    for name, p in presets.items():
+        bpy.ops.wm.read_homefile(use_empty=True)
+        p.write(Path(out) / "given" / name)
+        bpy.ops.hud.add_preset(preset=name)
+        try:
+            export_mod.export_scene(bpy.context.evaluated_depsgraph_get(), Path(out) / "exported" / name)
+        except Exception as e:  # noqa: BLE001 - the test names the preset and the message
+            refused[name] = f"{type(e).__name__}: {e}"
+    disable(module)
+    return {"names": list(presets), "refused": refused}
+
+
+def test_every_preset_added_in_blender_exports_the_materials_it_was_given(tmp_path):
+    """Add HUD Preset then export, for every preset: the export loads, and every material and emission
+    field the preset gives comes back with its value. Materials share their Blender properties by name
+    (one "reflectance" for every material that has one), and a field a preset does not give kept
+    another material's default: hud-screen's screen (a Lambertian transmitter, tau 0.7, no reflectance)
+    exported the Lambertian reflector's reflectance and was refused, "reflectance + transmittance must
+    not exceed 1", so hud-screen could not be rendered from Blender at all."""
+    res, _ = in_blender(scenario_every_preset, tmp_path)
+    from tracer.scene import load_scene
+
+    assert res["refused"] == {}, res["refused"]
+    assert len(res["names"]) >= 10
+    for name in res["names"]:
+        load_scene(tmp_path / "exported" / name)
+        given = {o["name"]: o for o in json.loads((tmp_path / "given" / name / "scene.json").read_text())["objects"]}
+        out = {o["name"]: o for o in json.loads((tmp_path / "exported" / name / "scene.json").read_text())["objects"]}
+        for obj, spec in given.items():
+            assert obj in out, (name, obj)
+            for block in ("material", "emission"):
+                for key, value in (spec.get(block) or {}).items():
+                    if isinstance(value, (int, float)) and not isinstance(value, bool):
+                        back = out[obj][block][key]
+                        back = back[0] if isinstance(back, list) and len(set(back)) == 1 else back
+                        assert back == pytest.approx(value, rel=1e-6), (name, obj, block, key, value, back)
+                    elif isinstance(value, str) and key == "type":
+                        assert out[obj][block][key] == value, (name, obj, key)
