@@ -67,6 +67,9 @@ MAX_PHOTONS = 100_000_000
 PILOT_PHOTONS = 50_000
 #: The largest relative standard error of the photon map's design-eye values for a valid scan.
 MAX_PHOTON_ERROR = 0.1
+#: Pixels of the grid on which the field is found on a lit screen (each gathers photons: the whole
+#: grid of :func:`specular_paths`, 40,000 pixels, took 15 s of hud-screen's scan).
+FIELD_PIXELS = 10_000
 #: Where the field is found on a lit screen: the pixels whose luminance is at least this share of
 #: the 90th percentile of the lit ones (an edge halfway up the screen image's border).
 SCREEN_EDGE = 0.5
@@ -411,7 +414,9 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
                 progress(share * fraction, f"eyebox: photon map, {int(fraction * photons)} of {photons} photons")
 
         pmap = PhotonMap(world, photons, seed, progress=built)
-        survey = specular_paths(world, environment=False, photons=pmap)
+        eye = world.eye  # the field from the lit screen on a grid of at most FIELD_PIXELS (each a gather)
+        stride = max(1, math.ceil(math.sqrt(eye.width * eye.height / FIELD_PIXELS)))
+        survey = specular_paths(world, stride=stride, environment=False, photons=pmap)
     else:
         share = 0.0
     fld = display_field(world, pmap, survey) if field_deg is None else Field.given(field_deg)
