@@ -175,9 +175,11 @@ def test_a_stop_signal_to_the_process_group_ends_a_sweep_with_its_runs_so_far(tm
     assert sorted(p.name for p in out.iterdir()) == ["runs", "sweep.csv", "sweep.json", "sweep.png"]  # no staging
 
 
-def test_a_stop_signal_ends_an_eyebox_scan_with_nothing_written(tmp_path):
+@pytest.mark.parametrize("scene", ["hud-direct", "hud-screen"])
+def test_a_stop_signal_ends_an_eyebox_scan_with_nothing_written(tmp_path, scene):
+    """hud-screen's scan is stopped while its photon map is built (the progress bar's first lines)."""
     out = tmp_path / "e"
-    proc = subprocess.Popen([sys.executable, "-m", "tracer.cli", "eyebox", "hud-direct", "--out", str(out)], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-m", "tracer.cli", "eyebox", scene, "--out", str(out)], cwd=ROOT,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     line = proc.stderr.readline()  # the progress bar: the scan is under way
     assert line.startswith("["), line
