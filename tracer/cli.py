@@ -412,7 +412,7 @@ def cmd_false_colour(args) -> int:
 
 #: The eyebox scan's arguments and the command line's flags for them.
 EYEBOX_FLAGS = {"half_mm": "--half", "step_mm": "--step", "field_deg": "--field", "threshold": "--threshold",
-                "photons": "--photons"}
+                "photons": "--photons", "seed": "--seed"}
 
 
 def cmd_eyebox(args) -> int:
@@ -423,7 +423,7 @@ def cmd_eyebox(args) -> int:
     from .transport.world import World
 
     try:
-        check_scan(args.half, args.step, args.field, args.threshold, args.photons)
+        check_scan(args.half, args.step, args.field, args.threshold, args.photons, args.seed)
     except ScanArgumentError as e:
         print(f"error: {EYEBOX_FLAGS[e.argument]}: {e.message}", file=sys.stderr)
         return EXIT_INPUT

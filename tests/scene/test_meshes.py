@@ -197,3 +197,21 @@ def test_meshes_read_again_come_from_their_content_not_their_path(preset, tmp_pa
     for _ in range(2):
         with pytest.raises(SceneError, match="element 0"):
             load_scene(second)
+
+
+def test_an_obj_that_names_a_material_library_is_read_anew_each_time(preset):
+    """trimesh packs a multi-material OBJ's textures into an atlas and moves its texture coordinates
+    when the .mtl or its images change, which the .obj's own bytes do not show: such a mesh is not
+    kept by its content (tracer.scene.meshes._READ), while one without a library is."""
+    from tracer.scene import meshes
+
+    folder = preset("analytic-mirror")
+    obj = json.loads((folder / "scene.json").read_text())["objects"][0]
+    mesh = folder / obj["mesh"]
+    load_scene(folder)
+    kept = len(meshes._READ)
+    assert any(k[0] == ".obj" for k in meshes._READ)
+    mesh.write_text("mtllib materials.mtl\n" + mesh.read_text())
+    (folder / Path(obj["mesh"]).parent / "materials.mtl").write_text("newmtl m\nKd 1 1 1\n")
+    load_scene(folder)
+    assert len(meshes._READ) == kept  # read, not kept

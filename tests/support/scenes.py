@@ -119,7 +119,7 @@ def condenser_scene(folder):
                          "fov_deg": [12.0, 12.0]})
 
 
-def folded_screen_scene(folder, image: bool = False, rho: float = 0.9, luminance: float = 1e5):
+def folded_screen_scene(folder, image: bool = False, rho: float = 0.9, luminance: float = 1e5, baffle: bool = True):
     """A rear-projection screen (Lambertian transmitter, tau 0.8, at z = 0) lit from below by a disc
     emitter (radius 15 mm, facing down and to the right) through a horizontal mirror (reflectance
     ``rho``) at z = -100; an absorbing baffle at z = -30 blocks the emitter's direct view of the
@@ -127,18 +127,25 @@ def folded_screen_scene(folder, image: bool = False, rho: float = 0.9, luminance
     down at the screen from 300 mm, focused 600 mm away (beyond the screen, so that the field points'
     landing points move with the eye). ``image`` true: the same light without mirror and baffle, the
     emitter at its mirror image (facing up and to the right) with luminance rho x ``luminance``, which
-    the analysis' quadrature follows directly: a second method for the folded scene's photon map."""
+    the analysis' quadrature follows directly: a second method for the folded scene's photon map.
+    ``baffle`` false: no baffle, so the screen also sees the emitter directly (in the image scene too,
+    the emitter beside its image)."""
     sb = SceneBuilder(folder, "folded-screen" + ("-image" if image else ""), "a screen lit through a mirror fold")
     sb.add("screen", rectangle(60, 60), {"type": "lambertian_transmitter", "transmittance": 0.8},
            frame_matrix([0, 0, 0], [1, 0, 0], [0, 0, 1]))
     s = 1 / math.sqrt(2)
     if image:
-        sb.add("led", disk(15.0, 64), {"type": "absorber"}, frame_matrix([-200, 0, -150], [s, 0, -s], [s, 0, s]),
-               emission={"luminance": rho * luminance})
-    else:
+        sb.add("led_image", disk(15.0, 64), {"type": "absorber"},
+               frame_matrix([-200, 0, -150], [s, 0, -s], [s, 0, s]), emission={"luminance": rho * luminance})
+    if image and not baffle:
+        sb.add("led", disk(15.0, 64), {"type": "absorber"}, frame_matrix([-200, 0, -50], [s, 0, s], [s, 0, -s]),
+               emission={"luminance": luminance})
+    if not image:
         sb.add("mirror", rectangle(120, 150), {"type": "mirror", "reflectance": rho},
                frame_matrix([-130, 0, -100], [1, 0, 0], [0, 0, 1]))
-        sb.add("baffle", rectangle(220, 400), {"type": "absorber"}, frame_matrix([-190, 0, -30], [1, 0, 0], [0, 0, 1]))
+        if baffle:
+            sb.add("baffle", rectangle(220, 400), {"type": "absorber"},
+                   frame_matrix([-190, 0, -30], [1, 0, 0], [0, 0, 1]))
         sb.add("led", disk(15.0, 64), {"type": "absorber"}, frame_matrix([-200, 0, -50], [s, 0, s], [s, 0, -s]),
                emission={"luminance": luminance, "aim": {"target": "mirror", "share": 0.95}})
     return sb.write(eye={"position": [0, 0, 300], "gaze": [0, 0, -1], "up": [0, 1, 0], "pupil_diameter_mm": 4.0,

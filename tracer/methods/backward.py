@@ -46,7 +46,9 @@ MAX_CANDIDATES = 1 << 20
 #: A path splits at a glass surface or coating where the smaller branch carries at least this share
 #: of the two branches' flux, and below it with a probability that falls in proportion to the share
 #: (:meth:`BackwardTracer.continue_paths`). Bare glass reflects at least 4 % (n = 1.5, normal
-#: incidence): it always splits; a coating that reflects 0.5 % keeps the Fresnel choice 3 times in 4.
+#: incidence): it splits at every angle but grazing incidence and the edge of total internal
+#: reflection (where T falls below 2 %); a coating that reflects 0.5 % keeps the Fresnel choice 3
+#: times in 4. The photon method's eye paths follow the same rule.
 SPLIT_MIN = 0.02
 
 

@@ -316,11 +316,13 @@ class PhotonMap:
     ``photons`` particles leave the lights (with their aims, :class:`tracer.methods.forward.Particles`)
     on the random stream ``seed``; no Russian roulette. The gather radius ``radius_mm`` is set so
     that a photon at the median density gathers about ``gather`` = MAP_GATHER sqrt(photons /
-    MAP_PHOTONS) of its neighbours (at most :data:`MAP_MAX_RADIUS_SHARE` of the photons' extent): a
+    MAP_PHOTONS) of its neighbours (at most :data:`MAP_MAX_RADIUS_SHARE` of the extent of all the
+    stored photons; one radius for every surface, from the median density over all of them): a
     relative standard error of some 5 % at a million particles, and a blur of the order of the
-    radius (:meth:`luminance` gives each value's standard error). Raises nothing where no photon is
-    stored (a scene whose lights reach no scattering surface through optics): every look-up then
-    gives 0."""
+    radius (:meth:`luminance` gives each value's standard error, not the blur's bias). Paths cut at
+    ``max_depth`` are counted (``paths_cut``, in :meth:`summary`), not followed further. Raises
+    nothing where no photon is stored (a scene whose lights reach no scattering surface through
+    optics): every look-up then gives 0."""
 
     def __init__(self, world, photons: int, seed: int, max_depth: int = 12, progress=None):
         self.world = world
@@ -329,6 +331,7 @@ class PhotonMap:
         self.gather = MAP_GATHER * math.sqrt(max(self.emitted, 1) / MAP_PHOTONS)
         can_emit = world.accel is not None and world.lights.total_flux_lm > 0
         stored: list[tuple] = []
+        self.paths_cut = 0
         if can_emit and photons > 0:
             particles = Particles(world)
             pp = PhotonPass(particles, store_direct=False)
@@ -336,7 +339,7 @@ class PhotonMap:
             for a in range(0, photons, WAVE):
                 state, _ = particles.emit(ctx.rng, min(WAVE, photons - a), a, 1)
                 state.extra["scattered"] = np.zeros(len(state), bool)
-                trace(pp, state, ctx, max_depth, probe=False)
+                self.paths_cut += trace(pp, state, ctx, max_depth, probe=False)
                 if progress is not None:
                     progress(min(a + WAVE, photons) / photons)
             stored = pp.stored
@@ -383,7 +386,8 @@ class PhotonMap:
     def summary(self) -> dict:
         """What the map is, for a result's JSON."""
         return {"photons_emitted": self.emitted, "photons_stored": self.stored, "radius_mm": self.radius_mm,
-                "target_photons_per_gather": self.gather, "seed": self.seed}
+                "target_photons_per_gather": self.gather, "photon_paths_cut_at_max_depth": self.paths_cut,
+                "seed": self.seed}
 
 
 @register

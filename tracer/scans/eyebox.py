@@ -355,11 +355,13 @@ class EyeboxResult:
         }
 
 
-def check_scan(half_mm, step_mm, field_deg, threshold, photons: int = DEFAULT_PHOTONS):
+def check_scan(half_mm, step_mm, field_deg, threshold, photons: int = DEFAULT_PHOTONS, seed: int = 0):
     """Raise :class:`ScanArgumentError` naming the argument (half_mm, step_mm, field_deg, threshold,
-    photons) that is out of its range."""
+    photons, seed) that is out of its range."""
     if isinstance(photons, bool) or not isinstance(photons, int | np.integer) or not 0 <= photons <= MAX_PHOTONS:
         raise ScanArgumentError("photons", f"a whole number of particles in [0, {MAX_PHOTONS:,}], got {photons!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed < 2**63:
+        raise ScanArgumentError("seed", f"must be a whole number in [0, 2^63), got {seed!r}")
     half = np.asarray(half_mm, dtype=np.float64)
     if half.shape != (2,) or not np.all(np.isfinite(half)) or np.any(half < 0) or np.any(half > 1000):
         raise ScanArgumentError("half_mm", f"two half-widths in [0, 1000] mm, got {half_mm}")
@@ -400,13 +402,13 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     the given world is used for its scene only. Raises :class:`ScanArgumentError` naming an argument
     out of its range before tracing anything.
     """
-    check_scan(half_mm, step_mm, field_deg, threshold, photons)
+    check_scan(half_mm, step_mm, field_deg, threshold, photons, seed)
     scene = world.scene
     if any(o.material.type == "lcd" for o in scene.objects):
         world = World(clear_lcd(scene))
     survey = specular_paths(world, environment=False)
     pmap = None
-    if photons > 0 and _lit_through_optics(world, survey, seed):
+    if photons > 0 and _lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS)):
         share = 0.5  # of the progress: the photon map, then the grid
 
         def built(fraction):
@@ -414,9 +416,10 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
                 progress(share * fraction, f"eyebox: photon map, {int(fraction * photons)} of {photons} photons")
 
         pmap = PhotonMap(world, photons, seed, progress=built)
-        eye = world.eye  # the field from the lit screen on a grid of at most FIELD_PIXELS (each a gather)
-        stride = max(1, math.ceil(math.sqrt(eye.width * eye.height / FIELD_PIXELS)))
-        survey = specular_paths(world, stride=stride, environment=False, photons=pmap)
+        if field_deg is None:  # the field from the lit screen, on a grid of at most FIELD_PIXELS (each a gather)
+            eye = world.eye
+            stride = max(1, math.ceil(math.sqrt(eye.width * eye.height / FIELD_PIXELS)))
+            survey = specular_paths(world, stride=stride, environment=False, photons=pmap)
     else:
         share = 0.0
     fld = display_field(world, pmap, survey) if field_deg is None else Field.given(field_deg)
@@ -455,11 +458,11 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     return result
 
 
-def _lit_through_optics(world: World, survey: dict, seed: int) -> bool:
+def _lit_through_optics(world: World, survey: dict, seed: int, pilot_photons: int = PILOT_PHOTONS) -> bool:
     """Whether scattering surfaces that chief rays of the ``survey`` (:func:`specular_paths` at the
     design eye) end on receive more than SPECULAR_SHARE of their light through other surfaces, which
     the quadrature does not follow: where a specular surface blocks their direct view of a light (the
-    quadrature names it), or else where a pilot photon map of :data:`PILOT_PHOTONS` finds such light
+    quadrature names it), or else where a pilot photon map of ``pilot_photons`` finds such light
     (a screen lit by a mirror whose direct view of the light is blocked by an absorber)."""
     n = len(survey["pixels"])
     lum, _, through, _ = per_pixel(survey["paths"], n)
@@ -467,7 +470,7 @@ def _lit_through_optics(world: World, survey: dict, seed: int) -> bool:
         return True
     if not any(p["path"].endswith(":scatter") for p in survey["paths"]):
         return False
-    pilot = PhotonMap(world, PILOT_PHOTONS, seed)
+    pilot = PhotonMap(world, pilot_photons, seed)
     if pilot.grid is None:
         return False
     with_photons, _, _, _ = per_pixel(specular_paths(world, environment=False, photons=pilot)["paths"], n)

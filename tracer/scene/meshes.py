@@ -4,6 +4,7 @@ the closed outward surface a dielectric must be. Every error names the file and 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import re
 import threading
@@ -24,8 +25,10 @@ _OBJ_ZERO_INDEX = re.compile(rb"(?m)^f[ \t][^\n]*?(?:(?<=[ \t])|/)0(?=[/ \t\r]|$
 
 #: Meshes read so far, by their file's format and content (sha256), least recently used first: an F12
 #: after F12 in Blender exports the same files into a new folder, and a sweep's runs and the eyebox's
-#: worlds read them again; parsing is most of loading a scene (hud-direct: 0.2 of 0.3 s). A .gltf is
-#: not kept (its buffers may lie in other files). Arrays are handed out as copies.
+#: worlds read them again; parsing is most of loading a scene (hud-direct: 0.2 of 0.3 s). A kept mesh is
+#: parsed from the bytes that were hashed. Not kept: a .gltf (its buffers may lie in other files) and an
+#: OBJ that names a material library (trimesh packs a multi-material OBJ's textures into an atlas and
+#: moves its texture coordinates when the .mtl or its images change). Arrays are handed out as copies.
 _READ: OrderedDict[tuple[str, bytes], tuple] = OrderedDict()
 _READ_LOCK = threading.Lock()
 #: The most bytes of arrays :data:`_READ` keeps.
@@ -38,15 +41,14 @@ def _copies(entry: tuple) -> tuple:
 
 
 def _keep(key: tuple[str, bytes], entry: tuple):
-    size = sum(a.nbytes for a in entry if a is not None)
+    if sum(a.nbytes for a in entry if a is not None) > READ_CACHE_BYTES:
+        return  # one mesh larger than the whole cache would only empty it
     with _READ_LOCK:
         _READ[key] = entry
         total = sum(sum(a.nbytes for a in e if a is not None) for e in _READ.values())
         while total > READ_CACHE_BYTES and len(_READ) > 1:
             _, dropped = _READ.popitem(last=False)
             total -= sum(a.nbytes for a in dropped if a is not None)
-        if size > READ_CACHE_BYTES:
-            _READ.pop(key, None)
 
 
 def _check_obj_indices(ck: FieldChecker, data: bytes, rel: str, fld: str):
@@ -107,7 +109,8 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
         data = path.read_bytes()
     except OSError as e:
         ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
-    key = (suffix, hashlib.sha256(data).digest()) if suffix != ".gltf" else None
+    kept = suffix != ".gltf" and not (suffix == ".obj" and re.search(rb"(?m)^[ \t]*mtllib\b", data))
+    key = (suffix, hashlib.sha256(data).digest()) if kept else None
     with _READ_LOCK:
         entry = _READ.get(key) if key is not None else None
         if entry is not None:
@@ -125,7 +128,10 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
             # trimesh takes the median of a quad's texture coordinates it splits (nanmedian of an all-NaN
             # slice where a face has none): RuntimeWarnings about its own bookkeeping, not the mesh
             warnings.simplefilter("ignore", RuntimeWarning)
-            loaded = trimesh.load(str(path), process=False, maintain_order=True)
+            if key is not None:  # the bytes that were hashed (the file may change meanwhile)
+                loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, maintain_order=True)
+            else:
+                loaded = trimesh.load(str(path), process=False, maintain_order=True)
         if isinstance(loaded, trimesh.Scene):
             meshes = list(loaded.dump()) if hasattr(loaded, "dump") else list(loaded.geometry.values())
             if not meshes:

@@ -65,10 +65,10 @@ def _frame(ck: FieldChecker, params: dict, fld: str) -> np.ndarray:
 
 #: Distances of faces' points from surfaces computed so far, by their inputs' digest, least recently used
 #: first (an F12 after F12 in Blender loads the same surfaces on the same mesh again: 0.1 s of
-#: hud-direct's 0.3 s of loading); at most DISTANCES_KEPT of them.
+#: hud-direct's 0.3 s of loading); at most DISTANCES_BYTES of them.
 _DISTANCES: OrderedDict[bytes, np.ndarray] = OrderedDict()
 _DISTANCES_LOCK = threading.Lock()
-DISTANCES_KEPT = 64
+DISTANCES_BYTES = 64 << 20
 
 
 def _distances(shape, kind: str, params: dict, to_local: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -86,10 +86,11 @@ def _distances(shape, kind: str, params: dict, to_local: np.ndarray, points: np.
             return found.copy()
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         dist = distance(shape, to_local, points)
-    with _DISTANCES_LOCK:
-        _DISTANCES[key] = dist.copy()
-        while len(_DISTANCES) > DISTANCES_KEPT:
-            _DISTANCES.popitem(last=False)
+    if dist.nbytes <= DISTANCES_BYTES:
+        with _DISTANCES_LOCK:
+            _DISTANCES[key] = dist.copy()
+            while sum(d.nbytes for d in _DISTANCES.values()) > DISTANCES_BYTES:
+                _DISTANCES.popitem(last=False)
     return dist
 
 
