@@ -43,8 +43,8 @@ def _factor(f: Field) -> bool:
     return f.kind == "rgb" and f.maximum == 1.0
 
 
-def grey_twin(stored: str, f: Field, lo: float, hi: float):
-    """The number that sets R, G and B of the colour property ``stored`` at once (it reads their mean:
+def grey_twin(stored: str, f: Field):
+    """The number that sets R, G and B of the factor property ``stored`` at once (it reads their mean:
     the value itself while they are equal)."""
     def get(self):
         return float(sum(getattr(self, stored))) / 3.0
@@ -53,7 +53,8 @@ def grey_twin(stored: str, f: Field, lo: float, hi: float):
         setattr(self, stored, (value,) * 3)
 
     return FloatProperty(name=f.title, description=_tooltip(f) + " The same for R, G and B (the colour "
-                         "button beside it gives them apart)", min=lo, max=hi, precision=4, get=get, set=set_)
+                         "button beside it gives them apart)", min=f.minimum or 0.0, max=f.maximum, precision=4,
+                         get=get, set=set_)
 
 
 def twin(f: Field, name: str):
@@ -125,9 +126,7 @@ def annotations(fields: tuple[Field, ...], prefix: str = "", alternatives=(), se
             if shown is not None:
                 out.setdefault(SHOWN.format(prefix + f.name), shown)
             if _factor(f):
-                out.setdefault(GREY.format(prefix + f.name), grey_twin(
-                    prefix + f.name, f, 0.0 if f.minimum is None else f.minimum,
-                    1e30 if f.maximum is None else f.maximum))
+                out.setdefault(GREY.format(prefix + f.name), grey_twin(prefix + f.name, f))
                 out.setdefault(PER_CHANNEL.format(prefix + f.name), BoolProperty(
                     name="Per channel", description=f"Give {f.title}'s R, G and B apart (a tinted glass, a "
                                                     "coloured coating)"))

@@ -288,6 +288,28 @@ class PhotonPass(PathMethod):
         nxt.extra["scattered"][sl] = True
         return out
 
+    def run(self, ctx, n: int, replicates: int, max_depth: int, probe: bool = True, progress=None) -> int:
+        """Emit ``n`` particles dealt into ``replicates`` on ``ctx``'s stream, wave by wave, and trace
+        them to ``max_depth``, storing their photons; the paths cut there (followed further into
+        ``probe_stored`` where ``probe`` and the context has a probe stream). ``progress(fraction)``
+        after every wave."""
+        cut = 0
+        for a in range(0, n, WAVE):
+            state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
+            state.extra["scattered"] = np.zeros(len(state), bool)
+            cut += trace(self, state, ctx, max_depth, probe=probe)
+            if progress is not None:
+                progress(min(a + WAVE, n) / n)
+        return cut
+
+
+def stacked(stored: list[tuple]) -> list[np.ndarray] | None:
+    """The photons of :attr:`PhotonPass.stored` (a list of per-wave tuples) as the arrays of a
+    :class:`PhotonGrid` (p, d, beta, slot, ng, rep), or None where none was stored."""
+    if not stored:
+        return None
+    return [np.concatenate(parts, axis=-1) for parts in zip(*stored, strict=True)]
+
 
 #: A :class:`PhotonMap` of MAP_PHOTONS particles gathers about MAP_GATHER photons at a photon of
 #: its median density; the count grows as the square root of the particles, so that the relative
@@ -325,30 +347,21 @@ class PhotonMap:
     optics): every look-up then gives 0."""
 
     def __init__(self, world, photons: int, seed: int, max_depth: int = 12, progress=None):
-        self.world = world
         self.emitted = int(photons)
         self.seed = int(seed)
         self.gather = MAP_GATHER * math.sqrt(max(self.emitted, 1) / MAP_PHOTONS)
         can_emit = world.accel is not None and world.lights.total_flux_lm > 0
-        stored: list[tuple] = []
+        arrays = None
         self.paths_cut = 0
         if can_emit and photons > 0:
-            particles = Particles(world)
-            pp = PhotonPass(particles, store_direct=False)
+            pp = PhotonPass(Particles(world), store_direct=False)
             ctx = Context(world, make_rng(seed, 1), Timers(), Splats())
-            for a in range(0, photons, WAVE):
-                state, _ = particles.emit(ctx.rng, min(WAVE, photons - a), a, 1)
-                state.extra["scattered"] = np.zeros(len(state), bool)
-                self.paths_cut += trace(pp, state, ctx, max_depth, probe=False)
-                if progress is not None:
-                    progress(min(a + WAVE, photons) / photons)
-            stored = pp.stored
-        self.stored = sum(len(part[3]) for part in stored)
+            self.paths_cut = pp.run(ctx, photons, 1, max_depth, probe=False, progress=progress)
+            arrays = stacked(pp.stored)
+        self.stored = 0 if arrays is None else arrays[0].shape[1]
         self.radius_mm = 0.0
         self.grid: PhotonGrid | None = None
         if self.stored:
-            arrays = [np.concatenate(parts, axis=-1) for parts in zip(*stored, strict=True)]
-            arrays[5] = np.zeros(self.stored, np.int64)  # one replicate
             self.radius_mm = self._radius(arrays)
             self.grid = PhotonGrid(*arrays, self.radius_mm)
 
@@ -555,18 +568,13 @@ class PhotonTracer(BackwardTracer):
         pp = PhotonPass(self.particles, store_direct=not self.next_event, scale=self.photon_scale)
         pctx = Context(self.world, ctx.rng, ctx.timers, roulette=ctx.roulette, store=ctx.store,
                        probe_rng=ctx.probe_rng)
-        cut = 0
-        for a in range(0, n, WAVE):
-            state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
-            state.extra["scattered"] = np.zeros(len(state), bool)
-            cut += trace(pp, state, pctx, self.max_depth)
+        cut = pp.run(pctx, n, replicates, self.max_depth)
         _tally(ctx, "photons_emitted", n)
         _tally(ctx, "photon_paths_cut", cut)
 
         def grid(stored):
-            if not stored:
-                return None
-            return PhotonGrid(*(np.concatenate(parts, axis=-1) for parts in zip(*stored, strict=True)), radius)
+            arrays = stacked(stored)
+            return None if arrays is None else PhotonGrid(*arrays, radius)
 
         main = grid(pp.stored)
         if main is not None:

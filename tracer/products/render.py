@@ -184,11 +184,13 @@ class Products:
     a view) and its header attributes (``hud:*``)."""
 
     def __init__(self, fill: ImageFill, names: list[str], pixels: np.ndarray, preview: np.ndarray, report: dict,
-                 attrs: dict, layout_y: np.ndarray, layout_var_y: np.ndarray):
+                 attrs: dict, layout_y: np.ndarray, layout_var_y: np.ndarray, group_layout_y: dict[str, np.ndarray]):
         self.fill, self.names, self.pixels, self.preview, self.report = fill, names, pixels, preview, report
         self.attrs = attrs
-        # the image's luminance (cd/m^2) and its variance per position of the film's layout
+        # the image's luminance (cd/m^2) and its variance per position of the film's layout, and each
+        # channel's luminance (a film group's)
         self._layout_y, self._layout_var_y = layout_y, layout_var_y
+        self._group_layout_y = group_layout_y
         self.image = pixels[..., :3]
         self.channels = {name: pixels[..., k] for k, name in enumerate(names)}  # views, (H, W) each
 
@@ -202,7 +204,7 @@ class Products:
 
     def group_y(self, group: str) -> np.ndarray:
         """(H, W) float64 luminance, cd/m^2, of one channel of the image (a film group)."""
-        return self.fill.image(luminance3(self.fill.film.layout_rgb(group)))
+        return self.fill.image(self._group_layout_y[group])
 
 
 def _median_relative_error(y: np.ndarray, var_y: np.ndarray, fill: ImageFill) -> float | None:
@@ -246,12 +248,14 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     # the EXR's channels as one table of float32 columns (layout, C), the image's then each channel's
     # layer, spread over the pixels in one pass; Y_var is then put at the sampled pixels only (0 where
     # unmeasured: a filled pixel borrows its neighbour's value, not its error)
-    names, columns, variances = [], [], []
+    names, columns, variances, group_y = [], [], [], {}
     for g in [None, *groups]:
         rgb_g = rgb if g is None else film.layout_rgb(g)
         prefix = "" if g is None else f"{g}."
         names += [prefix + c for c in ("R", "G", "B", "Y", "Y_var")]
-        columns += [*rgb_g, y_at if g is None else luminance3(rgb_g), np.zeros(len(y_at))]
+        if g is not None:
+            group_y[g] = luminance3(rgb_g)
+        columns += [*rgb_g, y_at if g is None else group_y[g], np.zeros(len(y_at))]
         variances.append(var_at if g is None else film.layout_variance_y(g))
     pixels = fill.image(_float32(np.stack(columns, axis=1), names))  # (H, W, C)
     for i, var_g in enumerate(variances):
@@ -283,7 +287,7 @@ def render_products(world: World, integrator, result: RenderResult, budget: Budg
     pending = world.accel is not None
     report["analysis"] = "pending" if pending else "not run"  # what add_analysis adds: "done"
     report["analysis_seconds"] = None
-    products = Products(fill, names, pixels, preview, report, attrs, y_at, var_at)
+    products = Products(fill, names, pixels, preview, report, attrs, y_at, var_at, group_y)
     if analyse:
         add_analysis(products, world, integrator, result)
     return products

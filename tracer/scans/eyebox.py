@@ -406,6 +406,7 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     scene = world.scene
     if any(o.material.type == "lcd" for o in scene.objects):
         world = World(clear_lcd(scene))
+    eye = world.eye
     survey = specular_paths(world, environment=False)
     pmap = None
     if photons > 0 and _lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS)):
@@ -417,13 +418,11 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
 
         pmap = PhotonMap(world, photons, seed, progress=built)
         if field_deg is None:  # the field from the lit screen, on a grid of at most FIELD_PIXELS (each a gather)
-            eye = world.eye
             stride = max(1, math.ceil(math.sqrt(eye.width * eye.height / FIELD_PIXELS)))
             survey = specular_paths(world, stride=stride, environment=False, photons=pmap)
     else:
         share = 0.0
     fld = display_field(world, pmap, survey) if field_deg is None else Field.given(field_deg)
-    eye = world.eye
     tangents = fld.points()
     directions = eye.gaze + tangents[:, :1] * eye.right + tangents[:, 1:] * eye.up  # (5, 3)
     dist = eye.accommodation

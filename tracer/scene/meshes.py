@@ -7,14 +7,13 @@ import hashlib
 import io
 import json
 import re
-import threading
 import warnings
-from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import SceneError
+from ..core.kept import Kept
 from ..core.validate import FieldChecker
 from .format import MESH_SUFFIXES
 
@@ -28,27 +27,8 @@ _OBJ_ZERO_INDEX = re.compile(rb"(?m)^f[ \t][^\n]*?(?:(?<=[ \t])|/)0(?=[/ \t\r]|$
 #: worlds read them again; parsing is most of loading a scene (hud-direct: 0.2 of 0.3 s). A kept mesh is
 #: parsed from the bytes that were hashed. Not kept: a .gltf (its buffers may lie in other files) and an
 #: OBJ that names a material library (trimesh packs a multi-material OBJ's textures into an atlas and
-#: moves its texture coordinates when the .mtl or its images change). Arrays are handed out as copies.
-_READ: OrderedDict[tuple[str, bytes], tuple] = OrderedDict()
-_READ_LOCK = threading.Lock()
-#: The most bytes of arrays :data:`_READ` keeps.
-READ_CACHE_BYTES = 256 << 20
-
-
-def _copies(entry: tuple) -> tuple:
-    v, f, uv = entry
-    return v.copy(), f.copy(), None if uv is None else uv.copy()
-
-
-def _keep(key: tuple[str, bytes], entry: tuple):
-    if sum(a.nbytes for a in entry if a is not None) > READ_CACHE_BYTES:
-        return  # one mesh larger than the whole cache would only empty it
-    with _READ_LOCK:
-        _READ[key] = entry
-        total = sum(sum(a.nbytes for a in e if a is not None) for e in _READ.values())
-        while total > READ_CACHE_BYTES and len(_READ) > 1:
-            _, dropped = _READ.popitem(last=False)
-            total -= sum(a.nbytes for a in dropped if a is not None)
+#: moves its texture coordinates when the .mtl or its images change). At most 256 MiB of arrays.
+_READ = Kept(256 << 20)
 
 
 def _check_obj_indices(ck: FieldChecker, data: bytes, rel: str, fld: str):
@@ -111,12 +91,9 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
         ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
     kept = suffix != ".gltf" and not (suffix == ".obj" and re.search(rb"(?m)^[ \t]*mtllib\b", data))
     key = (suffix, hashlib.sha256(data).digest()) if kept else None
-    with _READ_LOCK:
-        entry = _READ.get(key) if key is not None else None
-        if entry is not None:
-            _READ.move_to_end(key)
+    entry = _READ.get(key) if key is not None else None
     if entry is not None:  # the same bytes were read and checked before
-        return _copies(entry)
+        return entry
     if suffix == ".obj":
         _check_obj_indices(ck, data, rel, fld)
     try:
@@ -170,8 +147,7 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
                 ck.fail(fld, f"{rel} has non-finite texture coordinates")
             uv = uv_arr
     if key is not None:
-        _keep(key, (v, f, uv))
-        return _copies((v, f, uv))
+        _READ.put(key, (v, f, uv))
     return v, f, uv
 
 

@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
-from collections import OrderedDict
 
 import numpy as np
 
+from ..core.kept import Kept
 from ..core.schema import parse_block
 from ..core.validate import FieldChecker
 from ..optics.materials import MATERIALS
@@ -65,10 +64,8 @@ def _frame(ck: FieldChecker, params: dict, fld: str) -> np.ndarray:
 
 #: Distances of faces' points from surfaces computed so far, by their inputs' digest, least recently used
 #: first (an F12 after F12 in Blender loads the same surfaces on the same mesh again: 0.1 s of
-#: hud-direct's 0.3 s of loading); at most DISTANCES_BYTES of them.
-_DISTANCES: OrderedDict[bytes, np.ndarray] = OrderedDict()
-_DISTANCES_LOCK = threading.Lock()
-DISTANCES_BYTES = 64 << 20
+#: hud-direct's 0.3 s of loading); at most 64 MiB of them.
+_DISTANCES = Kept(64 << 20)
 
 
 def _distances(shape, kind: str, params: dict, to_local: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -79,18 +76,12 @@ def _distances(shape, kind: str, params: dict, to_local: np.ndarray, points: np.
     h.update(np.ascontiguousarray(to_local, np.float64).tobytes())
     h.update(np.ascontiguousarray(points, np.float64).tobytes())
     key = h.digest()
-    with _DISTANCES_LOCK:
-        found = _DISTANCES.get(key)
-        if found is not None:
-            _DISTANCES.move_to_end(key)
-            return found.copy()
+    found = _DISTANCES.get(key)
+    if found is not None:
+        return found[0]
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         dist = distance(shape, to_local, points)
-    if dist.nbytes <= DISTANCES_BYTES:
-        with _DISTANCES_LOCK:
-            _DISTANCES[key] = dist.copy()
-            while sum(d.nbytes for d in _DISTANCES.values()) > DISTANCES_BYTES:
-                _DISTANCES.popitem(last=False)
+    _DISTANCES.put(key, (dist,))
     return dist
 
 
