@@ -209,3 +209,54 @@ def test_a_stop_signal_that_reaches_a_closing_pools_worker_late_loses_no_batch()
         for p in pool.pool._pool:
             if p.exitcode is None:
                 p.kill()
+
+
+PARENT_DIES = """
+import os, signal, sys, time
+sys.path.insert(0, {root!r})
+from tracer.runtime.parallel import WorkerPool
+
+pool = WorkerPool(2)
+while pool.poll_ready() < 2:
+    time.sleep(0.05)
+pool.used = True
+batches = [pool.pool.apply_async(time.sleep, (120.0,)) for _ in range(2)]
+time.sleep(0.5)  # both workers inside their batch
+with open({pids!r}, "w") as f:  # not stdout: the orphans would hold the pipe
+    f.write(" ".join(str(p.pid) for p in pool.pool._pool))
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+def test_workers_end_with_their_parent_however_it_ended(tmp_path):
+    """A worker outlived its parent: inside a batch until the batch was done, and for ever when the parent
+    died holding the task queue's lock (what Blender's exit left in the add-on's tests: an orphan that held
+    the test's pipe, which then waited 600 s). Killed with SIGKILL, whose end no handler sees, while both
+    workers are inside a 120 s batch, the parent's workers end within seconds."""
+    import os
+    import subprocess
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(PARENT_DIES.format(root=str(ROOT), pids=str(tmp_path / "pids")))
+    proc = subprocess.run([sys.executable, str(script)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                          timeout=120)
+    pids = [int(x) for x in (tmp_path / "pids").read_text().split()]
+    assert proc.returncode == -9 and len(pids) == 2
+    deadline = time.monotonic() + 10
+    while any(map(_running, pids)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [pid for pid in pids if _running(pid)]
+    for pid in alive:
+        os.kill(pid, 9)
+    assert not alive, f"workers {alive} outlived their parent"
