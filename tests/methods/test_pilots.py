@@ -11,7 +11,7 @@ import pytest
 from tests.support.scenes import LOW
 from tracer.core.units import luminance
 from tracer.methods import INTEGRATORS, Budget
-from tracer.methods.pilots import combined_image, relative_variances
+from tracer.methods.pilots import PILOT_FLOOR_SECONDS, applicable, combined_image, relative_variances, rule_choice
 from tracer.scene import load_scene
 
 
@@ -41,6 +41,25 @@ def test_auto_picks_on_its_pilots_the_method_a_longer_run_confirms(preset, name,
     score = {m: max(relative_variances(images, variances, k).values()) * longer[m][0] for k, m in enumerate(methods)}
     confirmed = min(score, key=score.get)
     assert chosen == confirmed == expected, (chosen, score)
+    world = INTEGRATORS["auto"](load_scene(folder), 2).world
+    assert rule_choice(applicable(world, lights=True, environment=True))[0] == expected  # what short budgets get
+
+
+@pytest.mark.parametrize("name,expected", [("hud-direct", "backward"), ("hud-screen", "photon")])
+def test_a_short_time_budget_chooses_by_the_rules_without_pilots(preset, name, expected):
+    """With a time budget whose pilot share is under PILOT_FLOOR_SECONDS, auto runs no pilot (they took 9 s
+    of a 2 s budget on hud-screen, leaving the render 0.2 s) and takes the rules' method, the one the pilots
+    and longer renders confirm on these presets (above); a longer budget still pilots."""
+    folder = preset(name, resolution=LOW)
+    integ = INTEGRATORS["auto"](load_scene(folder), 2)
+    integ.prepare(Budget(seconds=0.9 * PILOT_FLOOR_SECONDS / float(integ.opts["pilot_share"])))
+    (channel,) = integ.channels
+    assert channel.chosen == expected and channel.chosen_by.startswith("rules: "), channel.chosen_by
+    assert all(p.skipped is not None and p.seconds == 0 for p in channel.pilots), channel.pilots
+    assert integ._resolved["scene"]["method"] == expected  # what the workers build
+    longer = INTEGRATORS["auto"](load_scene(folder), 2)
+    longer.prepare(Budget(seconds=1.1 * PILOT_FLOOR_SECONDS / float(longer.opts["pilot_share"])))
+    assert longer.channels[0].chosen_by == "pilots"
 
 
 def test_the_score_ranks_pixels_in_the_combined_image_and_takes_the_worst_stratum():

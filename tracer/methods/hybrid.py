@@ -24,7 +24,9 @@ alone, backward tracing with next-event estimation wins on a screen lit directly
 beside that, through a lens that focuses it into a spot, which backward tracing reaches only by
 chance (tests/methods/test_pilots.py). The most efficient method renders the channel with the rest of the
 budget; the pilots are reported, not merged into the image. The variance of a pixel falls as 1 / N
-for every method here, so V x cost does not depend on the pilot's length.
+for every method here, so V x cost does not depend on the pilot's length. A budget in seconds whose
+pilot share is under :data:`tracer.methods.pilots.PILOT_FLOOR_SECONDS` runs no pilot: the rules choose
+(:func:`tracer.methods.pilots.rule_choice`), and the channels keep their own batch sizes.
 
 What applies (model no more than the scene needs; the report says what was skipped and why):
 
@@ -76,12 +78,14 @@ from .base import (
 )
 from .pilots import (
     PHOTON_NOT_NEEDED,
+    PILOT_FLOOR_SECONDS,
     PILOT_SEED,
     Pilot,
     applicable,
     pilot_batch_size,
     pilot_world,
     relative_variances,
+    rule_choice,
     run_pilot,
 )
 
@@ -192,14 +196,23 @@ class _Channels(Integrator):
             elif c.asked != "auto" and why is not None:
                 c.skipped = f"{c.asked} was asked for, but {why}"
         live = [c for c in self.channels if c.skipped is None]
+        pilot_seconds = float(self.opts["pilot_share"]) * budget.seconds if not in_rays else None
+        by_rules = pilot_seconds is not None and pilot_seconds < PILOT_FLOOR_SECONDS
         # What to pilot: every method that applies to an "auto" channel, where there is more than one;
         # with several channels, also the method of each channel (the allocation needs their variances).
+        # None on a short time budget: the rules choose, and the channels keep their own batch sizes.
         trials = {}
         for c in live:
             ok = [m for m in CANDIDATES if c.candidates.get(m, "") is None]
             methods = ok if c.asked == "auto" else [c.asked]
-            trials[c.name] = methods if (len(methods) > 1 or len(live) > 1) else []
-            if not trials[c.name]:
+            trials[c.name] = methods if (len(methods) > 1 or len(live) > 1) and not by_rules else []
+            if trials[c.name]:
+                continue
+            if c.asked == "auto" and len(methods) > 1:
+                c.chosen, why = rule_choice(c.candidates)
+                c.chosen_by = (f"rules: {why}; the budget's pilot share ({pilot_seconds:.3g} s) is under the "
+                               f"{PILOT_FLOOR_SECONDS:g} s that pilots take")
+            else:
                 c.chosen, c.chosen_by = methods[0], "given" if c.asked != "auto" else "the only one that applies"
         count = sum(len(t) for t in trials.values()) or 1
         share = float(self.opts["pilot_share"]) / count

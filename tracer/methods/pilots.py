@@ -128,6 +128,26 @@ PHOTON_NOT_NEEDED = ("every scattering surface the eye sees is lit straight from
                      "next-event estimation reaches them, photon maps are not needed")
 
 
+#: Seconds of a time budget's pilot share (``pilot_share`` x the budget) under which ``auto`` chooses by
+#: :func:`rule_choice` instead of pilots. The pilots need a few whole batches of every method that applies
+#: (1.8 s on hud-direct, 7.8 s on hud-screen, 2 cores), so that on a short budget they took the time of the
+#: render itself and more (auto on hud-screen with 2 s: 9.3 s of pilots, 0.2 s of render, 12 s of wall time).
+PILOT_FLOOR_SECONDS = 2.0
+
+
+def rule_choice(candidates: dict[str, str | None]) -> tuple[str, str]:
+    """The method the rules give a channel whose ``candidates`` ({method: None where it applies, else why
+    not}, :func:`applicable`) leave a choice, and why: the photon method where it applies (a scattering surface
+    in view is lit through specular optics, which next-event estimation cannot connect through), else
+    backward tracing with next-event estimation. The pilots confirm both on the presets (hud-direct:
+    backward; hud-direct-condenser and hud-screen: photon; tests/methods/test_pilots.py), and neither rule
+    picks forward tracing, which wins only where the eye sees small emitters through optics that a
+    backward path reaches by chance."""
+    if candidates.get("photon", "") is None:
+        return "photon", "a scattering surface in view is lit through specular optics (photon maps reach it)"
+    return "backward", "every scattering surface in view is lit straight from the emitters, or there is none"
+
+
 #: The strata a pilot is judged on: the brightest of these shares of the lit pixels (of the pilots'
 #: combined image), each at least STRATUM_PIXELS pixels; "lit" is all of them.
 STRATA = {"lit": 1.0, "brightest_half": 0.5, "brightest_tenth": 0.1, "brightest_hundredth": 0.01}
