@@ -15,9 +15,21 @@ import math
 import numpy as np
 
 from ..core.units import luminance
+from ..methods.photon import PhotonMap
 from ..transport.chains import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
 from ..transport.world import World
 from .sections import Sections, find_sections
+
+#: Particles of the photon map that follows the light reaching scattering surfaces through specular optics
+#: (a projection lens, a condenser) where the chief rays find such a surface: about 7 % per gather
+#: (tracer.methods.photon.PhotonMap) and 1.5 s on hud-screen (2 cores).
+ANALYSIS_PHOTONS = 250_000
+#: Particles of the pilot photon map that tells whether scattering surfaces in view are lit through other
+#: surfaces where the quadrature names no specular blocker (:func:`lit_through_optics`).
+PILOT_PHOTONS = 50_000
+#: Pixels (evenly spaced over the chief rays' grid) whose chains are listed under "paths" where a photon map
+#: is built: a gather at every grid point took 13 s on hud-screen.
+LISTED_PIXELS = 1_000
 
 
 def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
@@ -105,11 +117,17 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
             continue
         ratio, sigma = entry["rendered_over_predicted"], entry["rendered_minus_predicted_sigma"]
         if ratio < 1 - MISSING_SHARE and sigma < -MISSING_SIGMA:
-            advice = (": light outside an emitter's aim (glass or a lens between it and its target bends the aimed "
-                      "light off it) or high-order ghosts; render with the backward method, whose connections find "
-                      "it, or aim at the target's image through the optics" if method in ("forward", "photon") else
-                      ": high-order ghosts, whose glass branches beyond the first splits are drawn by chance; render "
-                      "longer, or raise the method's splits")
+            if method in ("forward", "photon"):
+                advice = (": light outside an emitter's aim (glass or a lens between it and its target bends the aimed "
+                          "light off it) or high-order ghosts; render with the backward method, whose connections find "
+                          "it, or aim at the target's image through the optics")
+            elif analysis.get("photon_map") is not None:
+                advice = (": scattering surfaces in view are lit through specular optics (a lens, a condenser, a "
+                          "mirror fold), which next-event estimation cannot connect through, so backward paths find "
+                          "that light only by chance; render with the photon method")
+            else:
+                advice = (": high-order ghosts, whose glass branches beyond the first splits are drawn by chance; "
+                          "render longer, or raise the method's splits")
             out.append(f"the {key} section renders {ratio:.3g} of the brightness-theorem prediction "
                        f"({entry['rendered_cd_m2']:.4g} against {entry['predicted_cd_m2']:.4g} cd/m^2, "
                        f"{-sigma:.3g} combined standard errors below it): the render misses light that reaches the "
@@ -117,8 +135,36 @@ def missing_light_warnings(analysis: dict, method: str) -> list[str]:
     return out
 
 
+def lit_through_optics(world: World, survey: dict, seed: int, pilot_photons: int = PILOT_PHOTONS,
+                       most: int | None = None) -> bool:
+    """Whether scattering surfaces that chief rays of the ``survey`` (:func:`specular_paths`) end on
+    receive more than SPECULAR_SHARE of their light through other surfaces, which the quadrature does
+    not follow: where a specular surface blocks their direct view of a light (the quadrature names it),
+    or else where a pilot photon map of ``pilot_photons`` (random stream ``seed``) finds such light (a
+    screen lit by a mirror whose direct view of the light is blocked by an absorber). ``most``: the pilot
+    is looked up at that many of the survey's pixels, evenly spaced (None: every one; the survey
+    without the environment then)."""
+    n = len(survey["pixels"])
+    lum, _, through, _ = per_pixel(survey["paths"], n)
+    if np.any(through > SPECULAR_SHARE * (lum + through)):
+        return True
+    if not any(p["path"].endswith(":scatter") for p in survey["paths"]):
+        return False
+    pilot = PhotonMap(world, pilot_photons, seed)
+    if pilot.grid is None:
+        return False
+    if most is None:
+        with_photons, _, _, _ = per_pixel(specular_paths(world, environment=False, photons=pilot)["paths"], n)
+    else:
+        pixels = survey["pixels"][evenly(np.arange(n), most)]
+        lum, _, _, _ = per_pixel(specular_paths(world, pixels=pixels, environment=False)["paths"], len(pixels))
+        with_photons, _, _, _ = per_pixel(specular_paths(world, pixels=pixels, environment=False,
+                                                         photons=pilot)["paths"], len(pixels))
+    return bool(np.any(with_photons - lum > SPECULAR_SHARE * with_photons))
+
+
 def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True,
-                       sections: Sections | None = None) -> dict:
+                       sections: Sections | None = None, photons: int = ANALYSIS_PHOTONS, seed: int = 0) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.transport.chains`.
 
     The sections are :mod:`tracer.analysis.sections`' ("symbol" and "background" where the dominant
@@ -131,16 +177,31 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     ``pupil_fill``), and its breakdown by path sums to it ("other paths" included). ``environment``
     False (a method that does not render it) leaves the environment out of the prediction.
 
+    Where the chief rays find a scattering surface lit through other surfaces (:func:`lit_through_optics`:
+    a projection lens or a condenser, the paper's sec. 4.1 screen; a mirror fold), a photon map of
+    ``photons`` particles (on the random stream ``seed``; :class:`tracer.methods.photon.PhotonMap`)
+    follows that light (``photon_map``), and its error joins the prediction's
+    (``predicted_photon_standard_error_cd_m2``: the Poisson error of the section's mean from what each
+    photon adds to it, exact although the section's points share photons). The map's blur over its
+    radius is not in it: the comparison is of section means, over which the blur moves little light
+    (the edges of a small symbol excepted).
+
     A section is compared (``rendered_over_predicted``) only where the analysis' assumptions hold;
     otherwise ``valid`` is false and ``not_comparable`` says why: a scattering surface lit through
-    specular surfaces (a condenser lens) whose light the analysis does not follow, or by a light
-    closer than its quadrature resolves (a backlight right behind a screen).
+    specular surfaces whose light the analysis does not follow (``photons`` 0), or by a light closer
+    than its quadrature resolves (a backlight right behind a screen).
     """
     res = specular_paths(world, environment=environment)
     grid_h, grid_w = res["grid"]
     pixels = res["pixels"]
     npts = len(pixels)
-    total, per_path, _, _ = per_pixel(res["paths"], npts)
+    total, _, _, _ = per_pixel(res["paths"], npts)
+    listed, pmap = res, None  # the chains listed under "paths": over the grid, or with photons a subset
+    if photons > 0 and lit_through_optics(world, res, seed, min(photons, PILOT_PHOTONS), most=LISTED_PIXELS):
+        pmap = PhotonMap(world, photons, seed)
+        listed = specular_paths(world, pixels=pixels[evenly(np.arange(npts), LISTED_PIXELS)],
+                                environment=environment, photons=pmap)
+    _, per_path, _, _ = per_pixel(listed["paths"], len(listed["pixels"]))
     out: dict = {
         "method": "every specular branch followed from the pupil (chief rays for the path list; "
                   f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
@@ -155,14 +216,18 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         "not_comparable": [],
         "notes": [],
         "paths": [],
+        "photon_map": None if pmap is None else pmap.summary(),
     }
+    if pmap is not None:
+        out["method"] += ("; the light that reaches scattering surfaces through specular optics from a photon map "
+                          "(tracer.methods.photon.PhotonMap), with its Poisson error")
     y_img = image_y.reshape(-1)
     v_img = var_y.reshape(-1)
-    for p, y in zip(res["paths"][:8], per_path[:8], strict=True):
-        out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / npts),
+    for p, y in zip(listed["paths"][:8], per_path[:8], strict=True):
+        out["paths"].append({"path": p["path"], "pixels_fraction": float(len(np.unique(p["pixel"])) / len(y)),
                              "predicted_mean_cd_m2": float(y.mean()),
                              "transfer_factor_mean": float(p["factor"].mean())})
-    if len(res["paths"]) > 8:
+    if len(listed["paths"]) > 8:
         out["paths"].append({"path": "other paths", "predicted_mean_cd_m2": float(sum(y.mean() for y in per_path[8:]))})
     if not res["paths"]:
         return out
@@ -177,7 +242,9 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         if len(idx) == 0:
             continue
         sel = evenly(idx, PUPIL_PIXELS)
-        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment)
+        if pmap is not None:
+            pmap.start_tally()
+        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment, photons=pmap)
         for k, v in pup["specular_blockers"].items():
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
         ends += pup["ends"]
@@ -192,8 +259,15 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         for p in pup["paths"]:
             np.add.at(per_ray, p["ray"], luminance(p["luminance"]) * n2)
         var_pixel = per_ray.reshape(len(sel), n2).var(axis=1, ddof=1) / n2
-        entry["predicted_standard_error_cd_m2"] = float(math.sqrt(var_pixel.sum()) / len(sel))
-        chief = float(total[sel].mean())
+        photon_se = 0.0 if pmap is None else pmap.stop_tally(pup["pupil_samples"] * len(sel))
+        entry["predicted_standard_error_cd_m2"] = float(math.hypot(math.sqrt(var_pixel.sum()) / len(sel), photon_se))
+        if pmap is not None:
+            entry["predicted_photon_standard_error_cd_m2"] = photon_se
+        if pmap is None:
+            chief = float(total[sel].mean())
+        else:  # the grid's chief rays gathered no photons
+            chief_res = specular_paths(world, pixels=pixels[sel], environment=environment, photons=pmap)
+            chief = float(per_pixel(chief_res["paths"], len(sel))[0].mean())
         entry["predicted_cd_m2"] = pred
         entry["predicted_chief_ray_cd_m2"] = chief
         entry["pupil_fill"] = pred / chief if chief > 0 else None

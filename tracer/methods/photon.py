@@ -199,13 +199,16 @@ class Gathered:
     flux: list[float]
 
 
-def gather(grid: PhotonGrid, it: Interaction, bsdf, rep: np.ndarray, squares: bool = False) -> Gathered:
+def gather(grid: PhotonGrid, it: Interaction, bsdf, rep: np.ndarray, squares: bool = False,
+           per_photon: tuple[np.ndarray, np.ndarray] | None = None) -> Gathered:
     """Gather ``grid``'s photons at the points of ``it`` (replicates ``rep``) on surfaces of ``bsdf``:
     photons of the same replicate and object within the radius whose normals agree
     (:meth:`PhotonGrid.pairs`), at most GATHER_PAIRS candidate pairs at a time. Dividing ``sums`` by pi
     r^2 N (N the particles emitted for the replicate) gives the luminance (Jensen 2001, eq. 7.6).
     ``squares`` false leaves :attr:`Gathered.squares` at 0 (the photon method's error bars come from
-    its replicates)."""
+    its replicates). ``per_photon`` (weights (3, m) of the points, a tally (photons,)): each photon's
+    weighted contributions summed over the points, Y, added to the tally (what the variance of a sum
+    over many points needs: the points share photons)."""
     m = len(it)
     cells, lo, hi = grid.candidates(it.p, rep)
     per_point = np.cumsum((hi - lo).sum(axis=1))
@@ -234,6 +237,9 @@ def gather(grid: PhotonGrid, it: Interaction, bsdf, rep: np.ndarray, squares: bo
         out.found += np.bincount(pt, minlength=m)
         if squares:
             out.squares += np.bincount(pt, weights=luminance3(contrib) ** 2, minlength=m)
+        if per_photon is not None:
+            weight, tally = per_photon
+            tally += np.bincount(ph, weights=luminance3(contrib * weight[:, pt]), minlength=len(tally))
         out.flux.append(float(luminance3(flux).sum()))
     return out
 
@@ -361,6 +367,7 @@ class PhotonMap:
         self.stored = 0 if arrays is None else arrays[0].shape[1]
         self.radius_mm = 0.0
         self.grid: PhotonGrid | None = None
+        self.tally: np.ndarray | None = None
         if self.stored:
             self.radius_mm = self._radius(arrays)
             self.grid = PhotonGrid(*arrays, self.radius_mm)
@@ -383,18 +390,39 @@ class PhotonMap:
             radius = min(largest, radius * math.sqrt(self.gather / max(median, 1.0)))
         return radius
 
-    def luminance(self, it: Interaction, bsdf) -> tuple[np.ndarray, np.ndarray]:
+    def luminance(self, it: Interaction, bsdf, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """At the points of ``it`` (on surfaces of ``bsdf``, looked at from ``it``'s outgoing
         direction): (the luminance of the light the photons bring (3, m), cd/m^2; its standard error
         (m,), Y cd/m^2). The density estimate L = sum_p f Phi_p / (pi r^2 N) (Jensen 2001, eq. 7.6);
         the photons gathered are a Poisson sample of the photon paths, so its variance is
-        sum_p Y(f Phi_p)^2 / (pi r^2 N)^2 (the radius' bias, a blur over r, is not in it)."""
+        sum_p Y(f Phi_p)^2 / (pi r^2 N)^2 (the radius' bias, a blur over r, is not in it). While a
+        tally runs (:meth:`start_tally`), each photon's contributions, times the points' ``weight``
+        (3, m), are summed into it."""
         m = len(it)
         if self.grid is None or m == 0:
             return np.zeros((3, m)), np.zeros(m)
-        g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True)
-        scale = 1.0 / (math.pi * self.radius_mm ** 2 * self.emitted)
-        return g.sums * scale, np.sqrt(g.squares) * scale
+        tally = None if self.tally is None or weight is None else (weight, self.tally)
+        g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True, per_photon=tally)
+        return g.sums * self.scale, np.sqrt(g.squares) * self.scale
+
+    @property
+    def scale(self) -> float:
+        """1 / (pi r^2 N), 1/mm^2: a gathered sum of f Phi times it is a luminance, cd/m^2."""
+        return 1.0 / (math.pi * self.radius_mm ** 2 * self.emitted)
+
+    def start_tally(self):
+        """Sum, from now on, what each photon adds to the luminances looked up (times their weights)."""
+        self.tally = np.zeros(self.stored)
+
+    def stop_tally(self, count: float) -> float:
+        """The standard error (cd/m^2) of the mean of ``count`` weighted luminances looked up since
+        :meth:`start_tally`: sqrt(sum_p (T_p scale / count)^2), T_p a photon's tally. The photons are a
+        Poisson sample, so this is exact however many points share a photon (the sum of the points'
+        own standard errors would take them as fully correlated). Ends the tally."""
+        tally, self.tally = self.tally, None
+        if tally is None or count <= 0 or not self.stored:
+            return 0.0
+        return float(np.sqrt(np.sum(tally * tally)) * self.scale / count)
 
     def summary(self) -> dict:
         """What the map is, for a result's JSON."""

@@ -317,7 +317,8 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
         report["analysis"], report["analysis_seconds"] = "hud figures only (stopped render)", seconds
         return seconds
     t1 = time.perf_counter()
-    analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections)
+    analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections,
+                                  seed=integrator.seed)
     analysis["seconds"] = sections_seconds + time.perf_counter() - t1  # the sections are its too
     counts = film.sample_counts()
     unmeasured = 0 if counts is None else int((counts < MIN_REPLICATES).sum())

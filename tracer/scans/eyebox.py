@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..analysis.brightness import SPECULAR_SHARE, per_pixel
+from ..analysis.brightness import PILOT_PHOTONS, SPECULAR_SHARE, lit_through_optics, per_pixel
 from ..core.units import luminance3
 from ..methods.photon import PhotonMap
 from ..products import charts
@@ -63,8 +63,6 @@ MAX_OFFSETS = 20_000
 DEFAULT_PHOTONS = 1_000_000
 #: The most particles a photon map may have (about 5 s per million on hud-screen, 2 cores).
 MAX_PHOTONS = 100_000_000
-#: Particles of the pilot photon map that decides whether a scan needs one (:func:`_lit_through_optics`).
-PILOT_PHOTONS = 50_000
 #: The largest relative standard error of the photon map's design-eye values for a valid scan.
 MAX_PHOTON_ERROR = 0.1
 #: Pixels of the grid on which the field is found on a lit screen (each gathers photons: the whole
@@ -409,7 +407,7 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     eye = world.eye
     survey = specular_paths(world, environment=False)
     pmap = None
-    if photons > 0 and _lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS)):
+    if photons > 0 and lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS)):
         share = 0.5  # of the progress: the photon map, then the grid
 
         def built(fraction):
@@ -455,25 +453,6 @@ def eyebox_scan(world: World, half_mm=(60.0, 30.0), step_mm: float = 5.0, field_
     result.reasons = _reasons(result)
     result.valid = not result.reasons
     return result
-
-
-def _lit_through_optics(world: World, survey: dict, seed: int, pilot_photons: int = PILOT_PHOTONS) -> bool:
-    """Whether scattering surfaces that chief rays of the ``survey`` (:func:`specular_paths` at the
-    design eye) end on receive more than SPECULAR_SHARE of their light through other surfaces, which
-    the quadrature does not follow: where a specular surface blocks their direct view of a light (the
-    quadrature names it), or else where a pilot photon map of ``pilot_photons`` finds such light
-    (a screen lit by a mirror whose direct view of the light is blocked by an absorber)."""
-    n = len(survey["pixels"])
-    lum, _, through, _ = per_pixel(survey["paths"], n)
-    if np.any(through > SPECULAR_SHARE * (lum + through)):
-        return True
-    if not any(p["path"].endswith(":scatter") for p in survey["paths"]):
-        return False
-    pilot = PhotonMap(world, pilot_photons, seed)
-    if pilot.grid is None:
-        return False
-    with_photons, _, _, _ = per_pixel(specular_paths(world, environment=False, photons=pilot)["paths"], n)
-    return bool(np.any(with_photons - lum > SPECULAR_SHARE * with_photons))
 
 
 def _reasons(r: EyeboxResult) -> list[str]:

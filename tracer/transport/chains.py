@@ -209,7 +209,7 @@ class ChiefRays(PathMethod):
                     np.add.at(coarse, ii[rough], luminance3(take(contrib, rough)))
         photon_se = None
         if self.photons is not None:  # the lights' light through optics, followed (the environment's is not)
-            value, photon_se = self.photons.luminance(it, bsdf)
+            value, photon_se = self.photons.luminance(it, bsdf, weight=state.beta)
             out += value
             through[:] = 0.0
         env = self.world.environment
