@@ -301,16 +301,20 @@ def test_a_backward_render_of_a_screen_lit_through_a_lens_is_told_it_misses_the_
     """hud-screen's screen is lit through its projection lens, which next-event estimation cannot connect
     through: backward paths find the light only by chance (20.7 cd/m^2 of some 1,900 on 300,000 rays), and
     the image's own error bars cannot show it. The photon map's prediction now makes the comparison, so
-    the report warns and names the photon method; a photon render of the same budget agrees with it."""
+    the report warns (for the symbols and the background) and names the photon method; a photon render of
+    the same budget agrees with it; its symbols come from the LCD's photons."""
     from tests.support.scenes import LOW
 
     folder = preset("hud-screen", resolution=LOW)
     back, _ = render_scene(load_scene(folder), "backward", Budget(rays=300_000), 1, tmp_path / "b")
-    image = back["brightness_theorem"]["image"]
+    image = back["brightness_theorem"]["symbol"]
     assert back["brightness_theorem"]["valid"] and image["rendered_over_predicted"] < 0.5, image
     missed = [w for w in back["warnings"] if "of the brightness-theorem prediction" in w]
-    assert len(missed) == 1 and "render with the photon method" in missed[0], back["warnings"]
+    assert len(missed) == 2 and all("render with the photon method" in w for w in missed), back["warnings"]
     photon, _ = render_scene(load_scene(folder), "photon", Budget(rays=300_000), 1, tmp_path / "p")
-    image = photon["brightness_theorem"]["image"]
-    assert abs(image["rendered_minus_predicted_sigma"]) < z_bound(1), image
+    for key in ("symbol", "background"):
+        image = photon["brightness_theorem"][key]
+        assert abs(image["rendered_minus_predicted_sigma"]) < z_bound(2), image
     assert not [w for w in photon["warnings"] if "of the brightness-theorem prediction" in w]
+    assert photon["hud"]["symbol_pixels_from"] == "lcd_cells_via_photons", photon["hud"]
+    assert back["hud"]["note"] == "the display region is dark", back["hud"]

@@ -64,6 +64,28 @@ def lcd_edge_scene(folder, share=0.9):
                          "resolution": [40, 8], "fov_deg": [1.2, 0.24]})
 
 
+def lcd_screen_scene(folder, gap: float = 0.5, contrast: float = 100.0):
+    """A backlight behind an LCD with one vertical edge (left half clear, as in :func:`lcd_edge_scene`)
+    imaged onto a diffuse screen ``gap`` mm in front of it (a Lambertian transmitter, tau 0.8), seen at
+    300 mm: a screen HUD without the projection lens. The screen sees the backlight through the LCD, so
+    the analysis follows that light with a photon map, whose photons carry the cell they crossed."""
+    folder.mkdir(parents=True)
+    img = np.zeros((8, 64, 3), np.uint8)
+    img[:, :32] = 255
+    write_png(folder / "edge.png", img)
+    sb = SceneBuilder(folder, "lcd-screen", "an LCD edge on a diffuse screen")
+    sb.add("screen", rectangle(40.0, 20.0)[:2], {"type": "lambertian_transmitter", "transmittance": 0.8},
+           frame_matrix([0, 300, 0], [1, 0, 0], [0, -1, 0]))
+    v, f, uv = rectangle(20.0, 10.0)
+    sb.add("lcd", (v, f), {"type": "lcd", "image": "edge.png", "transmittance": 0.5, "contrast_ratio": contrast},
+           frame_matrix([0, 300 + gap, 0], [1, 0, 0], [0, -1, 0]), uv=uv)
+    sb.add("backlight", rectangle(30.0, 20.0)[:2], {"type": "emitter", "luminance": 1000.0},
+           frame_matrix([0, 310, 0], [1, 0, 0], [0, -1, 0]))
+    return sb.write(eye={"position": [0, 0, 0], "gaze": [0, 1, 0], "up": [0, 0, 1], "pupil_diameter_mm": 3.0,
+                         "focal_length_mm": 16.67, "accommodation_distance_mm": 300.0,
+                         "resolution": [48, 24], "fov_deg": [3.6, 1.8]})
+
+
 def plate_scene(folder, thickness=4.76, emitter=None, analyser=None, strip=False, resolution=(4, 4),
                 fov=(0.1, 0.1), polarisation=None, extra=None):
     """A glass plate met at 67 deg reflecting an emitter into the eye (a windshield). ``strip``: a

@@ -53,6 +53,10 @@ def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]
 #: The pupil-integrated prediction: n x n stratified pupil points per pixel, on at most this many
 #: evenly spaced pixels of each section.
 PUPIL_GRID = 6
+#: The same where a photon map adds light to scattering surfaces: every ray gathers photons (a few hundred
+#: each), and a diffuse screen fills the pupil, so 16 rays per pixel do (36 took 6 of the 9 s of
+#: hud-screen's analysis).
+PUPIL_GRID_WITH_PHOTONS = 4
 
 
 PUPIL_PIXELS = 128
@@ -163,8 +167,19 @@ def lit_through_optics(world: World, survey: dict, seed: int, pilot_photons: int
     return bool(np.any(with_photons - lum > SPECULAR_SHARE * with_photons))
 
 
+def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = ANALYSIS_PHOTONS) -> PhotonMap | None:
+    """A photon map of ``photons`` particles (random stream ``seed``) where scattering surfaces that the
+    ``survey``'s chief rays end on are lit through other surfaces (:func:`lit_through_optics`), else
+    None: what :func:`brightness_theorem` adds to its prediction, and what tells a screen HUD's symbols
+    (:func:`tracer.analysis.sections.find_sections`)."""
+    if photons > 0 and lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS), most=LISTED_PIXELS):
+        return PhotonMap(world, photons, seed)
+    return None
+
+
 def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True,
-                       sections: Sections | None = None, photons: int = ANALYSIS_PHOTONS, seed: int = 0) -> dict:
+                       sections: Sections | None = None, photons: int = ANALYSIS_PHOTONS, seed: int = 0,
+                       photon_map: PhotonMap | None = None) -> dict:
     """Compare the render with the brightness-theorem prediction of :mod:`tracer.transport.chains`.
 
     The sections are :mod:`tracer.analysis.sections`' ("symbol" and "background" where the dominant
@@ -180,7 +195,8 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     Where the chief rays find a scattering surface lit through other surfaces (:func:`lit_through_optics`:
     a projection lens or a condenser, the paper's sec. 4.1 screen; a mirror fold), a photon map of
     ``photons`` particles (on the random stream ``seed``; :class:`tracer.methods.photon.PhotonMap`)
-    follows that light (``photon_map``), and its error joins the prediction's
+    follows that light (``photon_map``: :func:`analysis_photon_map`, or the one given), and its error joins
+    the prediction's
     (``predicted_photon_standard_error_cd_m2``: the Poisson error of the section's mean from what each
     photon adds to it, exact although the section's points share photons). The map's blur over its
     radius is not in it: the comparison is of section means, over which the blur moves little light
@@ -196,15 +212,16 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     pixels = res["pixels"]
     npts = len(pixels)
     total, _, _, _ = per_pixel(res["paths"], npts)
-    listed, pmap = res, None  # the chains listed under "paths": over the grid, or with photons a subset
-    if photons > 0 and lit_through_optics(world, res, seed, min(photons, PILOT_PHOTONS), most=LISTED_PIXELS):
-        pmap = PhotonMap(world, photons, seed)
+    listed = res  # the chains listed under "paths": over the grid, or with photons a subset
+    pmap = photon_map if photon_map is not None else analysis_photon_map(world, res, seed, photons)
+    if pmap is not None:
         listed = specular_paths(world, pixels=pixels[evenly(np.arange(npts), LISTED_PIXELS)],
                                 environment=environment, photons=pmap)
     _, per_path, _, _ = per_pixel(listed["paths"], len(listed["pixels"]))
     out: dict = {
         "method": "every specular branch followed from the pupil (chief rays for the path list; "
-                  f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections); scattering surfaces lit "
+                  f"{PUPIL_GRID}x{PUPIL_GRID} points over the pupil for the sections, {PUPIL_GRID_WITH_PHOTONS}x"
+                  f"{PUPIL_GRID_WITH_PHOTONS} with a photon map); scattering surfaces lit "
                   "directly by the emitters (deterministic quadrature) and by the environment ("
                   f"{ENV_SAMPLES} directions from its own distribution per point); luminance = product of R and T "
                   "along the chain x luminance behind it" + ("" if environment else "; the environment left out, as "
@@ -244,7 +261,8 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
         sel = evenly(idx, PUPIL_PIXELS)
         if pmap is not None:
             pmap.start_tally()
-        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=PUPIL_GRID, environment=environment, photons=pmap)
+        grid = PUPIL_GRID if pmap is None else PUPIL_GRID_WITH_PHOTONS
+        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=grid, environment=environment, photons=pmap)
         for k, v in pup["specular_blockers"].items():
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
         ends += pup["ends"]

@@ -10,8 +10,11 @@ on the HUD's light alone, so that every method is judged on one table:
 - where the dominant chain crosses an LCD (``symbol_pixels_from`` "lcd_cells"), the symbols are the
   pixels whose chain crosses a clear cell, the background those whose chain and ghost chain cross black
   cells, both eroded by one analysis cell;
-- where the eye sees the display only through a scattering screen (``"luminance_threshold"``: the LCD
-  lies before the screen, out of the chains' reach), the symbols are the pixels of the display region
+- where the eye sees the display only through a scattering screen lit through optics and the analysis has
+  a photon map (``"lcd_cells_via_photons"``), the symbols are the pixels whose chief ray lands where the
+  LCD's photons came through clear cells, the background where none did (:mod:`tracer.analysis.sections`);
+- otherwise, where the eye sees the display only through a scattering screen (``"luminance_threshold"``:
+  the LCD lies before the screen, out of the chains' reach), the symbols are the pixels of the display region
   above SYMBOL_SHARE of its 99th percentile (an LCD's clear and black cells differ by its contrast
   ratio) eroded by one pixel; among the rest, the most populous mode of the log luminance is the black
   leak, and darker modes a decade or more below it (a screen's margin that the LCD's image does not
@@ -155,7 +158,7 @@ def hud_figures(world, y: np.ndarray, environment: np.ndarray | None = None,
         return out
     if "symbol" in sections.masks:
         sym, bg = (sections.pixels(sections.masks[k], y.shape) for k in ("symbol", "background"))
-        found = "lcd_cells" if sym.any() and bg.any() else None
+        found = sections.symbols_from if sym.any() and bg.any() else None
         area = sections.stride ** 2  # the pixels a followed chief ray stands for
     else:
         area = 1

@@ -12,6 +12,14 @@ brightness-theorem comparison (:mod:`.brightness`) alike.
   cross black cells, so that the ghost's symbols do not count as black leak, at least
   BACKGROUND_MARGIN_PX pixels from any other: the black level away from the halo that the pupil spreads
   around every stroke.
+- Where the eye sees a screen lit through optics and a photon map follows its light
+  (:class:`tracer.methods.photon.PhotonMap`: hud-screen, whose LCD the projection lens images onto the
+  screen), the photons carry the LCD cell they crossed: "symbol" is the pixels whose chief ray lands on
+  the screen where at least SYMBOL_CLEAR_SHARE of the LCD's photons came through clear cells (counted,
+  not weighed: where each cell's image falls), eroded by one grid cell; "background" those where none
+  did (so that no symbol's light, and no lens ghost's, lies within the map's gather radius: the
+  brightness-theorem prediction there is the black leak's), BACKGROUND_MARGIN_PX pixels from any other.
+  The photons' span (4 gather radii on the screen) blurs the edges; the erosions leave it out.
 - Otherwise (the eye sees a screen, a diffuser or an emitter: no LCD can be followed through a scattering
   surface), "image" is every pixel the brightest chain reaches, eroded by one grid cell.
 - "display" is where the dominant chain (through the LCD, else the brightest) reaches, eroded by one grid
@@ -30,6 +38,9 @@ from ..transport.chains import specular_paths
 #: The background's distance from the symbols' edges (and the display's), pixels: the pupil's blur of a
 #: stroke, a pixel or two on the presets, is left out of the black level.
 BACKGROUND_MARGIN_PX = 3
+#: The share of an LCD's photons through clear cells at a screen point from which it is a symbol (module
+#: docstring); background has none.
+SYMBOL_CLEAR_SHARE = 0.5
 
 
 def erode(mask: np.ndarray, border_inside: bool = False) -> np.ndarray:
@@ -46,8 +57,11 @@ class Sections:
     chains : the :func:`~tracer.transport.chains.specular_paths` result they come from.
     masks : {"symbol", "background"} where the dominant chain crosses an LCD, else {"image"}.
     display : where the dominant chain reaches (eroded, border inside), or None where no chain does.
-    lcd : (gh, gw) the clear fraction of the LCD cell on the dominant chain (NaN off the LCD), or None.
+    lcd : (gh, gw) the clear fraction of the LCD cell on the dominant chain (NaN off the LCD), or of a
+        photon map's LCD photons where the chief ray lands on a screen; else None.
     lcd_paths : the chains that cross an LCD, brightest first (the primary image, then its ghost).
+    symbols_from : "lcd_cells" (chains through the LCD), "lcd_cells_via_photons" (a photon map's LCD
+        photons on a screen), or None (no symbol and background sections).
     """
 
     chains: dict
@@ -55,6 +69,7 @@ class Sections:
     display: np.ndarray | None
     lcd: np.ndarray | None
     lcd_paths: list[dict]
+    symbols_from: str | None = None
 
     @property
     def stride(self) -> int:
@@ -113,10 +128,30 @@ def _interior(world, chains: dict, main: dict, clear: np.ndarray) -> np.ndarray:
     return out.reshape(clear.shape)
 
 
-def find_sections(world, chains: dict | None = None) -> Sections:
+def _screen_clear_share(chains: dict, main: dict, photons) -> np.ndarray:
+    """(gh, gw) the share of ``photons``' LCD photons through clear cells where each grid pixel's chief ray
+    ends on the scattering surface of the chain ``main`` (its brightest end there; NaN elsewhere)."""
+    gh, gw = chains["grid"]
+    ends = [e for e in chains["ends"] if e[0] == "material"]
+    share = np.full(gh * gw, np.nan)
+    if not ends:
+        return share.reshape(gh, gw)
+    p = np.concatenate([e[2] for e in ends], axis=1)
+    weight = np.concatenate([e[4] for e in ends])
+    pixel = np.concatenate([e[5] for e in ends]) // chains["pupil_samples"]
+    on = np.flatnonzero(np.isin(pixel, main["pixel"]) & (weight > 0))
+    order = on[np.lexsort((-weight[on], pixel[on]))]  # by pixel, the brightest end first
+    first = order[np.r_[True, pixel[order][1:] != pixel[order][:-1]]] if len(order) else order
+    share[pixel[first]] = photons.clear_share(p[:, first])
+    return share.reshape(gh, gw)
+
+
+def find_sections(world, chains: dict | None = None, photons=None) -> Sections:
     """The sections of the HUD's own light (the environment left out: the display is what the HUD's
     chains reach, whatever lies behind it) on the grid of
-    :func:`~tracer.transport.chains.specular_paths`; ``chains``, that call's result where known."""
+    :func:`~tracer.transport.chains.specular_paths`; ``chains``, that call's result where known;
+    ``photons``, a :class:`tracer.methods.photon.PhotonMap` of the scene where its light reaches a screen
+    through optics (the symbols of a screen HUD from its LCD photons, module docstring)."""
     chains = specular_paths(world, environment=False) if chains is None else chains
     paths = chains["paths"]
     gh, gw = chains["grid"]
@@ -129,6 +164,15 @@ def find_sections(world, chains: dict | None = None) -> Sections:
     reached = reached.reshape(gh, gw)
     display = erode(reached, border_inside=True)
     if not lcd_paths:
+        if photons is not None and photons.lcd is not None:
+            share = _screen_clear_share(chains, main, photons)
+            symbol = erode(share >= SYMBOL_CLEAR_SHARE)  # NaN compares False
+            background = share == 0  # NaN compares False
+            for _ in range(math.ceil(BACKGROUND_MARGIN_PX / chains["stride"])):
+                background = erode(background)
+            if symbol.any() and background.any():
+                return Sections(chains, {"symbol": symbol, "background": background}, display, share, [],
+                                "lcd_cells_via_photons")
         return Sections(chains, {"image": erode(reached)}, display, None, [])
     lcd = _on_grid(chains, main)
     # NaN compares False: off the LCD is neither symbol nor background.
@@ -138,4 +182,4 @@ def find_sections(world, chains: dict | None = None) -> Sections:
     for _ in range(math.ceil(BACKGROUND_MARGIN_PX / chains["stride"])):
         background = erode(background)
     masks = {"symbol": _interior(world, chains, main, lcd >= 0.5), "background": background}
-    return Sections(chains, masks, display, lcd, lcd_paths)
+    return Sections(chains, masks, display, lcd, lcd_paths, "lcd_cells")

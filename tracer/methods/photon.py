@@ -51,6 +51,7 @@ from ..core.sampling import make_rng
 from ..core.units import luminance3
 from ..core.vec import F32, dot, take
 from ..optics.bsdf import IMPORTANCE, RADIANCE, Interaction
+from ..optics.materials import LCD
 from ..transport.path import (
     PROBE_DEPTH,
     CompactedState,
@@ -142,6 +143,7 @@ class PhotonGrid:
         key = _cell_hash(cell, rep)
         order = np.argsort(key, kind="stable")
         self.keys = key[order]
+        self.order = order  # the arrays' photon k is photon order[k] of those given (for arrays kept beside)
         t = lambda a: take(a, order)  # noqa: E731
         self.p, self.d, self.beta, self.slot, self.ng, self.rep, self.cell = (
             t(p), t(d), t(beta), t(slot), t(ng), t(rep), t(cell))
@@ -258,12 +260,16 @@ class PhotonPass(PathMethod):
 
     mode = IMPORTANCE
 
-    def __init__(self, particles: Particles, store_direct: bool, scale: float = math.inf):
+    def __init__(self, particles: Particles, store_direct: bool, scale: float = math.inf, tag_lcd: bool = False):
         self.particles = particles
         self.store_direct = store_direct
         self.scale = scale
         self.stored: list[tuple] = []
         self.probe_stored: list[tuple] = []
+        #: With ``tag_lcd``: each stored photon's transmittance relative to a clear cell at the first LCD its
+        #: path crossed (NaN: none), in the order of :attr:`stored`.
+        self.tag_lcd = tag_lcd
+        self.stored_lcd: list[np.ndarray] = []
 
     def potential(self, beta):
         if math.isinf(self.scale):  # the pilot gathered no photon: nothing to judge a photon against
@@ -287,11 +293,16 @@ class PhotonPass(PathMethod):
         if len(keep):
             t = lambda a: take(a, keep)  # noqa: E731
             self.stored.append((t(it.p), t(it.d), t(state.beta), it.slot[keep], t(it.ng), state.rep[keep]))
+            if self.tag_lcd:
+                self.stored_lcd.append(state.extra["lcd"][keep])
         return None
 
     def continue_paths(self, state, it, bsdf, ctx, nxt, sl):
         out = continue_by_sampling(state, it, self.particles.sampler(bsdf), ctx, IMPORTANCE, nxt, sl)
         nxt.extra["scattered"][sl] = True
+        if self.tag_lcd and isinstance(bsdf, LCD):
+            first = state.extra["lcd"]
+            nxt.extra["lcd"][sl] = np.where(np.isnan(first), luminance3(bsdf.modulation(it)), first)
         return out
 
     def run(self, ctx, n: int, replicates: int, max_depth: int, probe: bool = True, progress=None) -> int:
@@ -303,6 +314,8 @@ class PhotonPass(PathMethod):
         for a in range(0, n, WAVE):
             state, _ = self.particles.emit(ctx.rng, min(WAVE, n - a), a, replicates)
             state.extra["scattered"] = np.zeros(len(state), bool)
+            if self.tag_lcd:
+                state.extra["lcd"] = np.full(len(state), np.nan)
             cut += trace(self, state, ctx, max_depth, probe=probe)
             if progress is not None:
                 progress(min(a + WAVE, n) / n)
@@ -322,6 +335,8 @@ def stacked(stored: list[tuple]) -> list[np.ndarray] | None:
 #: error and the radius (the blur) both fall as N^(-1/4).
 MAP_GATHER = 400
 MAP_PHOTONS = 1_000_000
+#: An LCD cell passing at least this share of a clear cell's light counts as clear (:meth:`PhotonMap.clear_share`).
+CLEAR_CELL = 0.5
 #: A :class:`PhotonMap`'s radius is at most this share of the extent of the photons on their surface.
 MAP_MAX_RADIUS_SHARE = 0.05
 #: Photons whose neighbours are counted to set a :class:`PhotonMap`'s radius (the median of 500
@@ -359,18 +374,25 @@ class PhotonMap:
         can_emit = world.accel is not None and world.lights.total_flux_lm > 0
         arrays = None
         self.paths_cut = 0
+        tag = any(isinstance(m, LCD) for m in world.materials)
+        lcd = None
         if can_emit and photons > 0:
-            pp = PhotonPass(Particles(world), store_direct=False)
+            pp = PhotonPass(Particles(world), store_direct=False, tag_lcd=tag)
             ctx = Context(world, make_rng(seed, 1), Timers(), Splats())
             self.paths_cut = pp.run(ctx, photons, 1, max_depth, probe=False, progress=progress)
             arrays = stacked(pp.stored)
+            lcd = np.concatenate(pp.stored_lcd) if tag and pp.stored_lcd else None
         self.stored = 0 if arrays is None else arrays[0].shape[1]
         self.radius_mm = 0.0
         self.grid: PhotonGrid | None = None
         self.tally: np.ndarray | None = None
+        #: Each photon's LCD tag (:attr:`PhotonPass.stored_lcd`), in the grid's order; None without an LCD.
+        self.lcd: np.ndarray | None = None
         if self.stored:
             self.radius_mm = self._radius(arrays)
             self.grid = PhotonGrid(*arrays, self.radius_mm)
+            if lcd is not None and np.isfinite(lcd).any():
+                self.lcd = lcd[self.grid.order]
 
     def _radius(self, arrays) -> float:
         """The radius (mm) at which a photon at the median density has about ``gather`` neighbours: a
@@ -404,6 +426,26 @@ class PhotonMap:
         tally = None if self.tally is None or weight is None else (weight, self.tally)
         g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True, per_photon=tally)
         return g.sums * self.scale, np.sqrt(g.squares) * self.scale
+
+    def clear_share(self, p: np.ndarray) -> np.ndarray:
+        """At points ``p`` (3, m) mm on scattering surfaces: the share of the photons near each (in the
+        2 x 2 x 2 cells of side 2 r around it, a span of 4 r) that crossed an LCD through a clear cell
+        (transmittance at least CLEAR_CELL of a clear one), among those that crossed an LCD; NaN where
+        none did (no LCD, or no photon). Photons are counted, not weighed: an LCD passes a photon with its
+        cell's transmittance as a weight, so the counts follow where each cell's image falls on the
+        screen (its symbols and background), not how bright it is."""
+        m = p.shape[1]
+        out = np.full(m, np.nan)
+        if self.lcd is None or self.grid is None or m == 0:
+            return out
+        tagged = np.isfinite(self.lcd)
+        clear = np.concatenate([[0], np.cumsum(tagged & (self.lcd >= CLEAR_CELL))])
+        every = np.concatenate([[0], np.cumsum(tagged)])
+        _, lo, hi = self.grid.candidates(p, np.zeros(m, np.int64))
+        n_clear = (clear[hi] - clear[lo]).sum(axis=1)
+        n_all = (every[hi] - every[lo]).sum(axis=1)
+        np.divide(n_clear, n_all, out=out, where=n_all > 0)
+        return out
 
     @property
     def scale(self) -> float:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.aims import aim_preflight, aim_warnings
-from ..analysis.brightness import brightness_theorem, missing_light_warnings
+from ..analysis.brightness import analysis_photon_map, brightness_theorem, missing_light_warnings
 from ..analysis.hud import hud_figures
 from ..analysis.optics import check_requirements, optics_block
 from ..analysis.sections import find_sections
@@ -34,6 +34,7 @@ from ..optics.pupil import pupil_diameter_mm
 from ..runtime.parallel import render_parallel
 from ..scene import Scene, load_scene
 from ..scene.binocular import eye_for
+from ..transport.chains import specular_paths
 from ..transport.eye import ThinLensEye
 from ..transport.world import World
 from .fill import ImageFill
@@ -305,7 +306,11 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
     if world.accel is None:
         return 0.0
     scene, film, report = world.scene, result.film, products.report
-    sections = find_sections(world)
+    # A screen lit through optics gets a photon map (not for a stopped render: it would delay the stop),
+    # which tells its symbols (the LCD's photons) and joins the brightness-theorem prediction.
+    chains = specular_paths(world, environment=False)
+    pmap = None if result.partial else analysis_photon_map(world, chains, integrator.seed)
+    sections = find_sections(world, chains, photons=pmap)
     sections_seconds = time.perf_counter() - t0
     channels_y = {g: products.group_y(g) for g in film.groups if g}
     report["hud"] = hud_figures(world, channels_y["hud"], channels_y.get("environment"), sections) \
@@ -318,7 +323,7 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
         return seconds
     t1 = time.perf_counter()
     analysis = brightness_theorem(world, products.y, products.var_y, integrator.renders_environment, sections,
-                                  seed=integrator.seed)
+                                  seed=integrator.seed, photon_map=pmap)
     analysis["seconds"] = sections_seconds + time.perf_counter() - t1  # the sections are its too
     counts = film.sample_counts()
     unmeasured = 0 if counts is None else int((counts < MIN_REPLICATES).sum())

@@ -110,7 +110,8 @@ class ChiefRays(PathMethod):
         #: Where chains end on a light or a scattering surface, for :func:`aim_coverage`: (kind
         #: "emission" or "material", object slots (m,), points (3, m), directions toward the eye (3, m),
         #: weight (m,): the luminance an emitter sends along the chain, the chain's transfer factor
-        #: at a scattering surface, which may be lit through optics the analysis does not follow).
+        #: at a scattering surface, which may be lit through optics the analysis does not follow; the
+        #: rays' indices (m,), pixel times the pupil's samples).
         self.ends: list[tuple] = []
 
     def _code(self, parent: np.ndarray, labels: list[str], which: np.ndarray | None = None) -> np.ndarray:
@@ -158,7 +159,7 @@ class ChiefRays(PathMethod):
         if self.world.polar is not None:
             beta = self.world.polar.emitted(beta, state.extra, state.d, lights.slot[tri])
         value = beta * lights.emitted(tri, state.d)
-        self.ends.append(("emission", lights.slot[tri], p, -state.d, luminance3(value)))
+        self.ends.append(("emission", lights.slot[tri], p, -state.d, luminance3(value), state.owner))
         self._leaf(state, *self._by_object(lights.slot[tri]), value)
 
     def connect(self, state, it, bsdf, ctx):
@@ -215,7 +216,7 @@ class ChiefRays(PathMethod):
         env = self.world.environment
         if self.environment and not env.is_black:
             out += self._environment_light(it, bsdf, ctx.rng, through)
-        self.ends.append(("material", it.slot, it.p, -state.d, luminance3(state.beta)))  # lit or not (a screen)
+        self.ends.append(("material", it.slot, it.p, -state.d, luminance3(state.beta), state.owner))  # lit or not
         factor = luminance3(state.beta)
         self._leaf(state, *self._by_object(it.slot, ":scatter"), state.beta * out, factor * through, factor * coarse,
                    None if photon_se is None else factor * photon_se)
@@ -407,7 +408,7 @@ def aim_coverage(world, ends: list[tuple]) -> dict[str, dict]:
     (a plane slab brings an image t (1 - 1/n) nearer), or the target is smaller than what the eye
     receives light through."""
     kinds: dict[tuple, list] = defaultdict(list)
-    for kind, slot, p, wo, lum in ends:
+    for kind, slot, p, wo, lum, _ in ends:
         kinds[kind].append((slot, p, wo, lum))
     objects = world.scene.objects
     out = {}
