@@ -73,6 +73,7 @@ def test_a_source_imaged_into_part_of_the_pupil_is_predicted_by_the_pupil_averag
     assert image["rendered_over_predicted"] == pytest.approx(1.0, abs=0.08)
 
 
+@pytest.mark.slow
 def test_a_screen_lit_through_glass_is_compared_through_a_photon_map(tmp_path):
     """A screen lit only through a glass block (the condenser of paper sec. 4.1): the quadrature sees
     the glass block the LED, and the section was "not compared" (a lower bound). A photon map now
@@ -99,6 +100,7 @@ def test_a_screen_lit_through_glass_is_compared_through_a_photon_map(tmp_path):
     assert any("screen (through glass)" in r for r in old["not_comparable"])
 
 
+@pytest.mark.slow
 def test_the_photon_map_predicts_a_screen_lit_through_a_mirror_fold_as_its_mirror_image(tmp_path):
     """A second method for the photon map's prediction: a screen lit by an emitter only through a mirror
     (an absorbing baffle blocks its direct view, so the quadrature names no specular blocker and a pilot
@@ -297,12 +299,15 @@ def test_the_environment_lights_scattering_surfaces_in_the_prediction(tmp_path):
     assert not roofed["valid"] and "road (through roof)" in roofed["not_comparable"][0], roofed["not_comparable"]
 
 
+@pytest.mark.slow
 def test_a_backward_render_of_a_screen_lit_through_a_lens_is_told_it_misses_the_light(preset, tmp_path):
     """hud-screen's screen is lit through its projection lens, which next-event estimation cannot connect
     through: backward paths find the light only by chance (20.7 cd/m^2 of some 1,900 on 300,000 rays), and
     the image's own error bars cannot show it. The photon map's prediction now makes the comparison, so
     the report warns (for the symbols and the background) and names the photon method; a photon render of
-    the same budget agrees with it; its symbols come from the LCD's photons."""
+    the same budget agrees with it (its symbols within the map's blur, which lowers the prediction of
+    hud-screen's thin strokes by up to about 8 %; its background within both errors); its symbols come
+    from the LCD's photons."""
     from tests.support.scenes import LOW
 
     folder = preset("hud-screen", resolution=LOW)
@@ -312,9 +317,9 @@ def test_a_backward_render_of_a_screen_lit_through_a_lens_is_told_it_misses_the_
     missed = [w for w in back["warnings"] if "of the brightness-theorem prediction" in w]
     assert len(missed) == 2 and all("render with the photon method" in w for w in missed), back["warnings"]
     photon, _ = render_scene(load_scene(folder), "photon", Budget(rays=300_000), 1, tmp_path / "p")
-    for key in ("symbol", "background"):
-        image = photon["brightness_theorem"][key]
-        assert abs(image["rendered_minus_predicted_sigma"]) < z_bound(2), image
+    symbol, background = (photon["brightness_theorem"][k] for k in ("symbol", "background"))
+    assert 0.95 < symbol["rendered_over_predicted"] < 1.2, symbol
+    assert abs(background["rendered_minus_predicted_sigma"]) < z_bound(1), background
     assert not [w for w in photon["warnings"] if "of the brightness-theorem prediction" in w]
     assert photon["hud"]["symbol_pixels_from"] == "lcd_cells_via_photons", photon["hud"]
     assert back["hud"]["note"] == "the display region is dark", back["hud"]

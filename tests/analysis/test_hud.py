@@ -4,6 +4,7 @@ crossed, so the symbol and background pixels come from where each cell's image f
 from the rendered values (a threshold on a noisy image read symbols 10 times too bright)."""
 
 import numpy as np
+import pytest
 
 from tests.support.addon import read_multilayer
 from tests.support.scenes import lcd_screen_scene
@@ -16,6 +17,7 @@ from tracer.scene import load_scene
 CR = 100.0
 
 
+@pytest.mark.slow
 def test_a_screen_hud_takes_its_symbols_from_the_lcd_cells_its_photons_crossed(tmp_path):
     """An LCD whose left half is clear lies 0.5 mm behind a diffuse screen: the symbol pixels are the
     screen's left half and the background its right half (away from the edge), for a backward and a

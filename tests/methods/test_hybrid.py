@@ -159,3 +159,31 @@ def test_a_channel_whose_pilots_find_no_light_is_skipped_with_a_warning_that_say
     assert any(w.startswith(f"no light path found: hybrid traced 0 paths (0 rays), its pilots {pilots:,} paths (")
                for w in res.warnings), res.warnings
     assert luminance(res.film.rgb()).max() == 0.0
+
+
+def test_a_short_time_budget_splits_between_the_channels_that_size_their_own_batches(preset, monkeypatch):
+    """Under the rules (a time budget too short for pilots) hybrid has no pilot variances to allocate its
+    batches by, so each channel sizes its own batch to a time budget; a hybrid batch is a batch of every
+    channel, so each gets its share of the budget (it got the whole: a hybrid batch took twice its
+    share of the time). hud-direct under a sky: the HUD channel by the rules, the environment's the only
+    method that applies, both fitted to half the budget."""
+    from tracer.methods.backward import BackwardTracer
+    from tracer.methods.pilots import PILOT_FLOOR_SECONDS
+
+    fitted = []
+    original = BackwardTracer.fit_batch
+
+    def record(self, budget):
+        fitted.append(budget.seconds)
+        return original(self, budget)
+
+    monkeypatch.setattr(BackwardTracer, "fit_batch", record)
+    folder = preset("hud-direct", resolution=LOW)
+    sky(folder)
+    integ = INTEGRATORS["hybrid"](load_scene(folder), 1)
+    seconds = 0.5 * PILOT_FLOOR_SECONDS / float(integ.opts["pilot_share"])
+    integ.prepare(Budget(seconds=seconds))
+    hud, env = integ.channels
+    assert hud.chosen == "backward" and hud.chosen_by.startswith("rules: "), hud.chosen_by
+    assert env.chosen == "backward" and env.chosen_by == "the only one that applies"
+    assert fitted == [seconds / 2, seconds / 2]

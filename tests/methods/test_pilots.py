@@ -45,6 +45,7 @@ def test_auto_picks_on_its_pilots_the_method_a_longer_run_confirms(preset, name,
     assert rule_choice(applicable(world, lights=True, environment=True))[0] == expected  # what short budgets get
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,expected", [("hud-direct", "backward"), ("hud-screen", "photon")])
 def test_a_short_time_budget_chooses_by_the_rules_without_pilots(preset, name, expected):
     """With a time budget whose pilot share is under PILOT_FLOOR_SECONDS, auto runs no pilot (they took 9 s

@@ -229,11 +229,14 @@ os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _running(pid: int) -> bool:
-    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped, does not)."""
+    """Whether process ``pid`` still runs as a pool worker (a zombie, ended but not yet reaped, does not; nor
+    does another process that took its number since)."""
     try:
         with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
+            running = f.read().rsplit(")", 1)[1].split()[0] != "Z"
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return running and b"spawn_main" in f.read()
+    except (FileNotFoundError, ProcessLookupError):
         return False
 
 

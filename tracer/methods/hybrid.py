@@ -55,6 +55,7 @@ estimators); batches stay seed-addressed, so workers and clusters merge them exa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -210,8 +211,8 @@ class _Channels(Integrator):
                 continue
             if c.asked == "auto" and len(methods) > 1:
                 c.chosen, why = rule_choice(c.candidates)
-                c.chosen_by = (f"rules: {why}; the budget's pilot share ({pilot_seconds:.3g} s) is under the "
-                               f"{PILOT_FLOOR_SECONDS:g} s that pilots take")
+                c.chosen_by = (f"rules: {why}; the budget's pilot share ({pilot_seconds:.3g} s) is under "
+                               f"{PILOT_FLOOR_SECONDS:g} s, too short for pilots")
             else:
                 c.chosen, c.chosen_by = methods[0], "given" if c.asked != "auto" else "the only one that applies"
         count = sum(len(t) for t in trials.values()) or 1
@@ -243,11 +244,15 @@ class _Channels(Integrator):
                 c.chosen, c.chosen_by = best.method, "given" if c.asked != "auto" else "pilots"
         live = [c for c in live if c.skipped is None]
         sizes = self._batch_sizes(live, budget)
+        # A hybrid batch is a batch of every channel: channels that size their own batches to a time budget
+        # (no pilots to allocate by) share it.
+        own = budget if len(live) <= 1 or budget.seconds is None else \
+            dataclasses.replace(budget, seconds=budget.seconds / len(live))
         for c in live:
             c.integrator = self._make(c, c.chosen, self._seed(c), sizes[c.name][0])
             c.every = sizes[c.name][1]
             if sizes[c.name][0] is None:
-                c.integrator.fit_batch(budget)
+                c.integrator.fit_batch(own)
         self._collect_components()
         self._resolved = {c.name: {"skipped": c.skipped, "chosen_by": c.chosen_by, "method": c.chosen,
                                    "batch_size": c.integrator.batch_size if c.integrator else None,

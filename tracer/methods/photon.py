@@ -337,6 +337,9 @@ MAP_GATHER = 400
 MAP_PHOTONS = 1_000_000
 #: An LCD cell passing at least this share of a clear cell's light counts as clear (:meth:`PhotonMap.clear_share`).
 CLEAR_CELL = 0.5
+#: The fewest LCD photons near a point for :meth:`PhotonMap.clear_share` to tell (some 40 per gather radius at
+#: the analysis' 250,000 particles on hud-screen's symbols).
+CLEAR_SHARE_PHOTONS = 20
 #: A :class:`PhotonMap`'s radius is at most this share of the extent of the photons on their surface.
 MAP_MAX_RADIUS_SHARE = 0.05
 #: Photons whose neighbours are counted to set a :class:`PhotonMap`'s radius (the median of 500
@@ -357,7 +360,8 @@ class PhotonMap:
     values share their random numbers, so their ratios to the design eye are far less noisy than each.
 
     ``photons`` particles leave the lights (with their aims, :class:`tracer.methods.forward.Particles`)
-    on the random stream ``seed``; no Russian roulette. The gather radius ``radius_mm`` is set so
+    on the random stream (``seed``, ``stream``: a render's batch k draws from stream k, so a map that
+    checks a render takes one no batch does); no Russian roulette. The gather radius ``radius_mm`` is set so
     that a photon at the median density gathers about ``gather`` = MAP_GATHER sqrt(photons /
     MAP_PHOTONS) of its neighbours (at most :data:`MAP_MAX_RADIUS_SHARE` of the extent of all the
     stored photons; one radius for every surface, from the median density over all of them): a
@@ -367,9 +371,10 @@ class PhotonMap:
     nothing where no photon is stored (a scene whose lights reach no scattering surface through
     optics): every look-up then gives 0."""
 
-    def __init__(self, world, photons: int, seed: int, max_depth: int = 12, progress=None):
+    def __init__(self, world, photons: int, seed: int, max_depth: int = 12, progress=None, stream: int = 1):
         self.emitted = int(photons)
         self.seed = int(seed)
+        self.stream = int(stream)
         self.gather = MAP_GATHER * math.sqrt(max(self.emitted, 1) / MAP_PHOTONS)
         can_emit = world.accel is not None and world.lights.total_flux_lm > 0
         arrays = None
@@ -378,7 +383,7 @@ class PhotonMap:
         lcd = None
         if can_emit and photons > 0:
             pp = PhotonPass(Particles(world), store_direct=False, tag_lcd=tag)
-            ctx = Context(world, make_rng(seed, 1), Timers(), Splats())
+            ctx = Context(world, make_rng(seed, stream), Timers(), Splats())
             self.paths_cut = pp.run(ctx, photons, 1, max_depth, probe=False, progress=progress)
             arrays = stacked(pp.stored)
             lcd = np.concatenate(pp.stored_lcd) if tag and pp.stored_lcd else None
@@ -431,7 +436,8 @@ class PhotonMap:
         """At points ``p`` (3, m) mm on scattering surfaces: the share of the photons near each (in the
         2 x 2 x 2 cells of side 2 r around it, a span of 4 r) that crossed an LCD through a clear cell
         (transmittance at least CLEAR_CELL of a clear one), among those that crossed an LCD; NaN where
-        none did (no LCD, or no photon). Photons are counted, not weighed: an LCD passes a photon with its
+        fewer than CLEAR_SHARE_PHOTONS did (no LCD; off the LCD's image, where a lens ghost's few photons
+        land). Photons are counted, not weighed: an LCD passes a photon with its
         cell's transmittance as a weight, so the counts follow where each cell's image falls on the
         screen (its symbols and background), not how bright it is."""
         m = p.shape[1]
@@ -444,7 +450,7 @@ class PhotonMap:
         _, lo, hi = self.grid.candidates(p, np.zeros(m, np.int64))
         n_clear = (clear[hi] - clear[lo]).sum(axis=1)
         n_all = (every[hi] - every[lo]).sum(axis=1)
-        np.divide(n_clear, n_all, out=out, where=n_all > 0)
+        np.divide(n_clear, n_all, out=out, where=n_all >= CLEAR_SHARE_PHOTONS)
         return out
 
     @property

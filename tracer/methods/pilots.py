@@ -137,15 +137,19 @@ PILOT_FLOOR_SECONDS = 2.0
 
 def rule_choice(candidates: dict[str, str | None]) -> tuple[str, str]:
     """The method the rules give a channel whose ``candidates`` ({method: None where it applies, else why
-    not}, :func:`applicable`) leave a choice, and why: the photon method where it applies (a scattering surface
-    in view is lit through specular optics, which next-event estimation cannot connect through), else
-    backward tracing with next-event estimation. The pilots confirm both on the presets (hud-direct:
+    not}, :func:`applicable`) leave a choice, and why: the photon method where it applies (the quadrature
+    finds specular optics between a scattering surface in view and the emitters, which next-event
+    estimation cannot connect through), else backward tracing with next-event estimation. (A screen lit
+    only through a mirror fold behind an absorbing baffle names no specular blocker: backward, which
+    renders it right by sampling the screen's law.) The pilots confirm both on the presets (hud-direct:
     backward; hud-direct-condenser and hud-screen: photon; tests/methods/test_pilots.py), and neither rule
     picks forward tracing, which wins only where the eye sees small emitters through optics that a
     backward path reaches by chance."""
     if candidates.get("photon", "") is None:
-        return "photon", "a scattering surface in view is lit through specular optics (photon maps reach it)"
-    return "backward", "every scattering surface in view is lit straight from the emitters, or there is none"
+        return "photon", ("specular optics stand between a scattering surface in view and the emitters (photon maps "
+                          "reach it, next-event estimation does not)")
+    return "backward", ("no specular optics stand between a scattering surface in view and the emitters (next-event "
+                        "estimation reaches it)")
 
 
 #: The strata a pilot is judged on: the brightest of these shares of the lit pixels (of the pilots'

@@ -332,8 +332,9 @@ def add_analysis(products: Products, world: World, integrator, result: RenderRes
                                           "the rendered means have no error bars to compare by")
     report["brightness_theorem"] = analysis
     report["warnings"] += [f"brightness theorem not compared: {r}" for r in analysis["not_comparable"]]
-    if not unmeasured:
-        report["warnings"] += missing_light_warnings(analysis, result.method)
+    if not unmeasured:  # by the methods that rendered it (auto's and hybrid's channels name theirs)
+        used = {c["method"] for c in (result.extra.get("channels") or {}).values() if c.get("method")}
+        report["warnings"] += missing_light_warnings(analysis, used or result.method)
     if result.method in ("forward", "photon"):
         report["warnings"] += aim_warnings(analysis)
     # the optical analysis from the scene's own eye (the design eye point), whichever eye rendered

@@ -37,7 +37,8 @@ EXIT_PUPIL = Field(
     alternatives=(("object",), ("center_mm", "radius_mm")))
 
 PILOT_SHARE = Field("pilot_share", "number", 0.1, unit="1", minimum=0.01, maximum=0.5, label="Pilot share",
-                    description="Share of the budget spent on the pilots that choose the methods")
+                    description="Share of the budget spent on the pilots that choose the methods (a time "
+                                "budget whose share is under 2 s runs none: the rules choose)")
 
 
 def _exit_pupil(ck: FieldChecker, opts: dict, fld: str, scene):
@@ -105,9 +106,11 @@ METHOD_OPTIONS: dict[str, MethodOptions] = {m.name: m for m in (
               description="Knaus-Zwicker alpha: the radius^2 shrinks as batches^(alpha - 1); 1 keeps it"))),
     MethodOptions("hybrid", (
         Field("hud_method", "choice", "auto", choices=("auto",) + CANDIDATES, label="HUD channel",
-              description="Method of the channel of light from the scene's emitters (auto: chosen by pilots)"),
+              description="Method of the channel of light from the scene's emitters (auto: chosen by pilots, "
+                          "or by rules on a budget too short for them)"),
         Field("environment_method", "choice", "auto", choices=("auto", "backward"), label="Environment channel",
-              description="Method of the channel of light from the environment (auto: chosen by pilots)"),
+              description="Method of the channel of light from the environment (auto: chosen by pilots, or by "
+                          "rules on a budget too short for them)"),
         PILOT_SHARE)),
     MethodOptions("auto", (PILOT_SHARE,)),
 )}
