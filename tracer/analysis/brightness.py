@@ -11,6 +11,8 @@ times the luminance behind them (../shared/reference/hud-physics.md, "Photometry
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 
 import numpy as np
 
@@ -31,8 +33,9 @@ ANALYSIS_STREAM, ANALYSIS_PILOT_STREAM = 2**31 - 2, 2**31 - 3
 #: surfaces where the quadrature names no specular blocker (:func:`lit_through_optics`).
 PILOT_PHOTONS = 50_000
 #: Pixels (evenly spaced over the chief rays' grid) whose chains are listed under "paths" where a photon map
-#: is built: a gather at every grid point took 13 s on hud-screen.
-LISTED_PIXELS = 1_000
+#: is built: a gather at every grid point took 13 s on hud-screen (the breakdown of the sections' own
+#: prediction is in each section).
+LISTED_PIXELS = 300
 
 
 def _mask_stats(y: np.ndarray, var: np.ndarray, idx: np.ndarray) -> dict:
@@ -57,9 +60,9 @@ def _shift(a: np.ndarray, b: np.ndarray, max_shift: int = 25) -> tuple[int, int]
 #: evenly spaced pixels of each section.
 PUPIL_GRID = 6
 #: The same where a photon map adds light to scattering surfaces: every ray gathers photons (a few hundred
-#: each), and a diffuse screen fills the pupil, so 16 rays per pixel do (36 took 6 of the 9 s of
+#: each), and a diffuse screen fills the pupil, so 9 rays per pixel do (36 took 6 of the 9 s of
 #: hud-screen's analysis).
-PUPIL_GRID_WITH_PHOTONS = 4
+PUPIL_GRID_WITH_PHOTONS = 3
 
 
 PUPIL_PIXELS = 128
@@ -180,8 +183,32 @@ def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = AN
     and what tells a screen HUD's symbols (:func:`tracer.analysis.sections.find_sections`)."""
     if photons > 0 and lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS), most=LISTED_PIXELS,
                                           stream=ANALYSIS_PILOT_STREAM):
-        return PhotonMap(world, photons, seed, stream=ANALYSIS_STREAM)
+        return kept_map(world, photons, seed, ANALYSIS_STREAM)
     return None
+
+
+#: Photon maps kept by (scene hash, particles, seed, stream): a scene rendered again with its seed (F12
+#: after F12 in Blender, a test suite) builds its analysis' map once. A map holds no state between
+#: look-ups (tallies are the caller's), so one serves every analysis.
+_MAPS: OrderedDict = OrderedDict()
+_MAPS_LOCK = threading.Lock()
+KEPT_MAPS = 2
+
+
+def kept_map(world: World, photons: int, seed: int, stream: int) -> PhotonMap:
+    """The photon map of ``world``'s scene for these particles and random stream: kept, or built (the
+    map depends on the scene's lights and objects, which its hash covers, not on the eye)."""
+    key = (world.scene.scene_hash, int(photons), int(seed), int(stream))
+    with _MAPS_LOCK:
+        if key in _MAPS:
+            _MAPS.move_to_end(key)
+            return _MAPS[key]
+    built = PhotonMap(world, photons, seed, stream=stream)
+    with _MAPS_LOCK:
+        _MAPS[key] = built
+        while len(_MAPS) > KEPT_MAPS:
+            _MAPS.popitem(last=False)
+    return built
 
 
 def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True,
@@ -275,13 +302,11 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
             continue
         sel = evenly(idx, PUPIL_PIXELS)
         grid = PUPIL_GRID if pmap is None else PUPIL_GRID_WITH_PHOTONS
-        if pmap is not None:
-            pmap.start_tally()
-        try:
-            pup = specular_paths(world, pixels=pixels[sel], pupil_grid=grid, environment=environment, photons=pmap)
-        finally:  # the tally ends with the look-ups, whatever happens to them
-            photon_sum_se = 0.0 if pmap is None else pmap.stop_tally(1.0)
-        photon_se = photon_sum_se / (pup["pupil_samples"] * len(sel))  # of the mean of the section's rays
+        tally = None if pmap is None else pmap.new_tally()
+        pup = specular_paths(world, pixels=pixels[sel], pupil_grid=grid, environment=environment, photons=pmap,
+                             photon_tally=tally)
+        # the map's error of the mean of the section's rays (each ray's luminance is 1/n^2 of its pixel's)
+        photon_se = 0.0 if pmap is None else pmap.sum_standard_error(tally) / (pup["pupil_samples"] * len(sel))
         for k, v in pup["specular_blockers"].items():
             blockers[k] = sorted(set(blockers.get(k, [])) | set(v))
         ends += pup["ends"]

@@ -390,7 +390,6 @@ class PhotonMap:
         self.stored = 0 if arrays is None else arrays[0].shape[1]
         self.radius_mm = 0.0
         self.grid: PhotonGrid | None = None
-        self.tally: np.ndarray | None = None
         #: Each photon's LCD tag (:attr:`PhotonPass.stored_lcd`), in the grid's order; None without an LCD.
         self.lcd: np.ndarray | None = None
         if self.stored:
@@ -417,19 +416,20 @@ class PhotonMap:
             radius = min(largest, radius * math.sqrt(self.gather / max(median, 1.0)))
         return radius
 
-    def luminance(self, it: Interaction, bsdf, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def luminance(self, it: Interaction, bsdf, weight: np.ndarray | None = None,
+                  tally: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """At the points of ``it`` (on surfaces of ``bsdf``, looked at from ``it``'s outgoing
         direction): (the luminance of the light the photons bring (3, m), cd/m^2; its standard error
         (m,), Y cd/m^2). The density estimate L = sum_p f Phi_p / (pi r^2 N) (Jensen 2001, eq. 7.6);
         the photons gathered are a Poisson sample of the photon paths, so its variance is
-        sum_p Y(f Phi_p)^2 / (pi r^2 N)^2 (the radius' bias, a blur over r, is not in it). While a
-        tally runs (:meth:`start_tally`), each photon's contributions, times the points' ``weight``
-        (3, m), are summed into it."""
+        sum_p Y(f Phi_p)^2 / (pi r^2 N)^2 (the radius' bias, a blur over r, is not in it). With a
+        ``tally`` ((stored,), the caller's: the map holds no state, so that one map serves several
+        analyses), each photon's contributions, times the points' ``weight`` (3, m), are added to it."""
         m = len(it)
         if self.grid is None or m == 0:
             return np.zeros((3, m)), np.zeros(m)
-        tally = None if self.tally is None or weight is None else (weight, self.tally)
-        g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True, per_photon=tally)
+        per_photon = None if tally is None or weight is None else (weight, tally)
+        g = gather(self.grid, it, bsdf, np.zeros(m, np.int64), squares=True, per_photon=per_photon)
         return g.sums * self.scale, np.sqrt(g.squares) * self.scale
 
     def clear_share(self, p: np.ndarray) -> np.ndarray:
@@ -458,19 +458,18 @@ class PhotonMap:
         """1 / (pi r^2 N), 1/mm^2: a gathered sum of f Phi times it is a luminance, cd/m^2."""
         return 1.0 / (math.pi * self.radius_mm ** 2 * self.emitted)
 
-    def start_tally(self):
-        """Sum, from now on, what each photon adds to the luminances looked up (times their weights)."""
-        self.tally = np.zeros(self.stored)
+    def new_tally(self) -> np.ndarray:
+        """A tally for :meth:`luminance`: what each photon adds to the luminances looked up with it."""
+        return np.zeros(self.stored)
 
-    def stop_tally(self, count: float) -> float:
-        """The standard error (cd/m^2) of the mean of ``count`` weighted luminances looked up since
-        :meth:`start_tally`: sqrt(sum_p (T_p scale / count)^2), T_p a photon's tally. The photons are a
-        Poisson sample, so this is exact however many points share a photon (the sum of the points'
-        own standard errors would take them as fully correlated). Ends the tally."""
-        tally, self.tally = self.tally, None
-        if tally is None or count <= 0 or not self.stored:
+    def sum_standard_error(self, tally: np.ndarray) -> float:
+        """The standard error (cd/m^2) of the sum of the weighted luminances looked up with ``tally``:
+        sqrt(sum_p (T_p scale)^2), T_p a photon's tally. The photons are a Poisson sample, so the photons
+        that several points share count (the sum of the points' own standard errors would take them as
+        fully correlated); for a fixed number of particles it is conservative."""
+        if not self.stored:
             return 0.0
-        return float(np.sqrt(np.sum(tally * tally)) * self.scale / count)
+        return float(np.sqrt(np.sum(tally * tally)) * self.scale)
 
     def summary(self) -> dict:
         """What the map is, for a result's JSON."""

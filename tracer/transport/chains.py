@@ -93,11 +93,13 @@ class ChiefRays(PathMethod):
 
     mode = RADIANCE
 
-    def __init__(self, world, level: int = 4, environment: bool = True, photons=None):
+    def __init__(self, world, level: int = 4, environment: bool = True, photons=None, photon_tally=None):
         self.world = world
         self.environment = environment
         #: Light through other surfaces at scattering surfaces (a tracer.methods.photon.PhotonMap), or None.
         self.photons = photons
+        #: What each photon adds to the chains' luminances (PhotonMap.luminance's tally), or None.
+        self.photon_tally = photon_tally
         self.quad = world.lights.quadrature(quadrature_levels(world, level)) if len(world.lights) else None
         #: Scattering object name -> names of the specular objects that block its direct view of a light.
         self.specular_blockers: dict[str, set[str]] = defaultdict(set)
@@ -210,7 +212,7 @@ class ChiefRays(PathMethod):
                     np.add.at(coarse, ii[rough], luminance3(take(contrib, rough)))
         photon_se = None
         if self.photons is not None:  # the lights' light through optics, followed (the environment's is not)
-            value, photon_se = self.photons.luminance(it, bsdf, weight=state.beta)
+            value, photon_se = self.photons.luminance(it, bsdf, weight=state.beta, tally=self.photon_tally)
             out += value
             through[:] = 0.0
         env = self.world.environment
@@ -311,7 +313,7 @@ class ChiefRays(PathMethod):
 
 def specular_paths(world, stride: int | None = None, max_depth: int = 12, directions: np.ndarray | None = None,
                    pixels: np.ndarray | None = None, pupil_grid: int = 0, environment: bool = True, seed: int = 0,
-                   photons=None):
+                   photons=None, photon_tally: np.ndarray | None = None):
     """Follow chief rays of a pixel grid (or along given world ``directions`` (p, 3) from the pupil
     centre, or of the given flat ``pixels``) through all specular branches.
 
@@ -321,7 +323,9 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
     the pupil and the pixel: the pixel's luminance where its rays see different things (paper eq. 2).
     ``environment`` False leaves the environment out (for methods that do not render it). ``photons``
     (a :class:`tracer.methods.photon.PhotonMap`, or None) adds the light that reaches scattering
-    surfaces through other surfaces (a projection lens), which the quadrature does not follow.
+    surfaces through other surfaces (a projection lens), which the quadrature does not follow; with a
+    ``photon_tally`` (:meth:`~tracer.methods.photon.PhotonMap.new_tally`), what each photon adds to the
+    rays' luminances (the luminances' Y, each ray's as its path carries it) is summed into it.
 
     Returns a dict with ``pixels`` (p,) flat indices analysed (or 0..p-1 for given directions),
     ``stride``, ``grid``, ``pupil_samples`` (n^2, or 1 for chief rays), ``specular_blockers``
@@ -370,7 +374,7 @@ def specular_paths(world, stride: int | None = None, max_depth: int = 12, direct
         o, d, _ = eye.generate_rays(rx, ry, lens if lens is not None else np.zeros((2, len(px))))
     samples = pupil_grid * pupil_grid if lens is not None else 1
     n = d.shape[1]
-    method = ChiefRays(world, environment=environment, photons=photons)
+    method = ChiefRays(world, environment=environment, photons=photons, photon_tally=photon_tally)
     beta = np.ones((3, n), F32)
     extra = {"sig": np.zeros(n, np.int64), "lcd": np.full(n, np.nan)}
     if world.polar is not None:  # the eye's detector row (and analyser): s and p followed separately
