@@ -263,3 +263,36 @@ def test_workers_end_with_their_parent_however_it_ended(tmp_path):
     for pid in alive:
         os.kill(pid, 9)
     assert not alive, f"workers {alive} outlived their parent"
+
+
+def test_a_closed_pool_joins_even_when_a_worker_hangs():
+    """A closed pool's join waited forever for a worker that never took its sentinel (one blocked for
+    good on the task queue's lock after its sibling ended: Blender's exit in the add-on's tests, 600 s).
+    With every batch back, the workers get JOIN_GRACE seconds to exit and are then killed: a worker
+    stopped with SIGSTOP no longer holds the join up."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from tracer.runtime.parallel import JOIN_GRACE, WorkerPool
+
+    pool = WorkerPool(2)
+    try:
+        deadline = time.monotonic() + 120
+        while pool.poll_ready() < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        pool.used = True
+        assert all(b.get(timeout=60) is None for b in [pool.pool.apply_async(time.sleep, (0.01,)) for _ in range(4)])
+        os.kill(pool.pool._pool[0].pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        closing = threading.Thread(target=pool.close, daemon=True)
+        closing.start()
+        closing.join(timeout=60)
+        assert not closing.is_alive(), "the closed pool's join waited for the stopped worker"
+        assert time.monotonic() - t0 < JOIN_GRACE + 20
+        assert all(p.exitcode is not None for p in pool.pool._pool)
+    finally:
+        for p in pool.pool._pool:
+            if p.exitcode is None:
+                p.kill()

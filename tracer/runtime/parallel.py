@@ -56,6 +56,8 @@ _WORKER: dict = {}
 READY = "ready"
 #: Seconds the parent waits for its workers to start.
 STARTUP_TIMEOUT = 600.0
+#: Seconds a closed pool's workers have to exit once their batches are back (:meth:`WorkerPool.join`).
+JOIN_GRACE = 5.0
 
 
 def _init_worker(ready, ending):
@@ -293,7 +295,30 @@ class WorkerPool:
         else:
             self.pool.close()
         if wait:
-            self.pool.join()
+            self.join()
+
+    def join(self):
+        """Wait for a closed pool's workers: until every batch handed out has come back, then JOIN_GRACE
+        seconds for the workers to take their sentinels and exit. A worker has been seen blocked for good
+        on the task queue's lock after its sibling ended (the add-on's tests, Blender's exit: 600 s), and
+        a plain join waited for it forever. One still there after the grace is killed (its work is done);
+        the pool's threads are then left to end with the process (daemons), and its exit-time terminate
+        is called off: a killed worker may hold one of the queues' locks, which both would wait for."""
+        pool = self.pool
+        workers = list(pool._pool)  # noqa: SLF001  (the pool's processes: a private attribute, stable)
+        while pool._cache and any(p.exitcode is None for p in workers):  # noqa: SLF001  (batches still out)
+            time.sleep(0.05)
+        deadline = time.monotonic() + JOIN_GRACE
+        for p in workers:
+            p.join(max(0.0, deadline - time.monotonic()))
+        stuck = [p for p in workers if p.exitcode is None]
+        if not stuck:
+            pool.join()
+            return
+        for p in stuck:
+            p.kill()
+            p.join(JOIN_GRACE)
+        pool._terminate.cancel()  # noqa: SLF001  (multiprocessing.util.Finalize of Pool._terminate_pool)
 
 
 #: The session's pool (:func:`shared_pool`), and pools closed without waiting for their workers' exit.
@@ -333,7 +358,7 @@ def close_shared_pool(terminate: bool = False, wait: bool = True):
         if not wait:
             _CLOSING.append(pool)
     while wait and _CLOSING:
-        _CLOSING.pop().pool.join()
+        _CLOSING.pop().join()
 
 
 
