@@ -243,14 +243,16 @@ def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, env
     specular surfaces whose light the analysis does not follow (``photons`` 0), or by a light closer
     than its quadrature resolves (a backlight right behind a screen).
     """
-    res = specular_paths(world, environment=environment)
+    # the sections' chains are the survey without the environment: the same call, made once
+    known = sections.chains if sections is not None else None
+    res = known if known is not None and not environment else specular_paths(world, environment=environment)
     grid_h, grid_w = res["grid"]
     pixels = res["pixels"]
     npts = len(pixels)
     total, _, _, _ = per_pixel(res["paths"], npts)
     listed = res  # the chains listed under "paths": over the grid, or with photons a subset
     if photon_map is None and photons > 0:
-        survey = specular_paths(world, environment=False) if environment else res
+        survey = res if not environment else known if known is not None else specular_paths(world, environment=False)
         photon_map = analysis_photon_map(world, survey, seed, photons)
     pmap = photon_map
     if pmap is not None:
