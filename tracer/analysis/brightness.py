@@ -11,11 +11,10 @@ times the luminance behind them (../shared/reference/hud-physics.md, "Photometry
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
 
 import numpy as np
 
+from ..core.kept import KeptResults
 from ..core.units import luminance
 from ..methods.photon import PhotonMap
 from ..transport.chains import ENV_SAMPLES, QUAD_TRUST, aim_coverage, specular_paths
@@ -180,9 +179,13 @@ def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = AN
     surfaces that the ``survey``'s chief rays end on (a survey without the environment: only the
     emitters' light through optics counts, which photons carry) are lit through other surfaces
     (:func:`lit_through_optics`), else None: what :func:`brightness_theorem` adds to its prediction,
-    and what tells a screen HUD's symbols (:func:`tracer.analysis.sections.find_sections`)."""
-    if photons > 0 and lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS), most=LISTED_PIXELS,
-                                          stream=ANALYSIS_PILOT_STREAM):
+    and what tells a screen HUD's symbols (:func:`tracer.analysis.sections.find_sections`). Both the
+    answer and the map are kept for the next analysis of the scene (:data:`KEPT_ANSWERS`, :func:`kept_map`)."""
+    if photons <= 0:
+        return None
+    key = (world.scene.scene_hash, repr(world.eye.spec), int(seed), min(photons, PILOT_PHOTONS))
+    if KEPT_ANSWERS.get(key, lambda: lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS),
+                                                        most=LISTED_PIXELS, stream=ANALYSIS_PILOT_STREAM)):
         return kept_map(world, photons, seed, ANALYSIS_STREAM)
     return None
 
@@ -190,25 +193,17 @@ def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = AN
 #: Photon maps kept by (scene hash, particles, seed, stream): a scene rendered again with its seed (F12
 #: after F12 in Blender, a test suite) builds its analysis' map once. A map holds no state between
 #: look-ups (tallies are the caller's), so one serves every analysis.
-_MAPS: OrderedDict = OrderedDict()
-_MAPS_LOCK = threading.Lock()
-KEPT_MAPS = 2
+KEPT_MAPS = KeptResults(2)
+#: :func:`lit_through_optics`'s answers for the analysis, by (scene hash, eye, seed, pilot particles): the
+#: survey it is asked about is the scene's chief rays from that eye, so the key covers what it depends on.
+KEPT_ANSWERS = KeptResults(64)
 
 
 def kept_map(world: World, photons: int, seed: int, stream: int) -> PhotonMap:
     """The photon map of ``world``'s scene for these particles and random stream: kept, or built (the
     map depends on the scene's lights and objects, which its hash covers, not on the eye)."""
-    key = (world.scene.scene_hash, int(photons), int(seed), int(stream))
-    with _MAPS_LOCK:
-        if key in _MAPS:
-            _MAPS.move_to_end(key)
-            return _MAPS[key]
-    built = PhotonMap(world, photons, seed, stream=stream)
-    with _MAPS_LOCK:
-        _MAPS[key] = built
-        while len(_MAPS) > KEPT_MAPS:
-            _MAPS.popitem(last=False)
-    return built
+    return KEPT_MAPS.get((world.scene.scene_hash, int(photons), int(seed), int(stream)),
+                         lambda: PhotonMap(world, photons, seed, stream=stream))
 
 
 def brightness_theorem(world: World, image_y: np.ndarray, var_y: np.ndarray, environment: bool = True,

@@ -22,6 +22,7 @@ eyes, IPD / 2 to either side, both lie in the eyebox.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import SceneError
+from ..core.kept import KeptResults
 from ..optics.materials import LCD
 from ..scene.binocular import vehicle_axes
 from ..scene.format import TARGET
@@ -791,15 +793,25 @@ def report_block(doc: dict) -> dict:
             "warnings": doc["warnings"], "seconds": doc["seconds"]["total"]}
 
 
+#: Render blocks of the optical analysis by scene hash: it depends on the scene alone (its own eye), so a
+#: scene rendered again (F12 after F12, a sweep's repeated runs) is analysed once. Handed out as copies.
+KEPT_BLOCKS = KeptResults(16, copy=copy.deepcopy)
+
+
 def optics_block(scene, world=None) -> dict:
     """report.json's ``optics`` block for a render (:func:`report_block`, without spots and the mesh
     comparison), or {"error": why} where the scene shows no image to analyse or lacks a target field the
-    analysis needs (the render does not fail for it; its requirements were checked before the render)."""
+    analysis needs (the render does not fail for it; its requirements were checked before the render).
+    ``world``: the scene's own (saves building it). Kept by the scene's hash (:data:`KEPT_BLOCKS`; its
+    ``seconds`` are those of the analysis that made it)."""
     from ..transport.sequential import ChainError
 
-    try:
-        return report_block(analyse(scene, spot=False, compare_mesh=False, world=world))
-    except SceneError as e:  # a field the analysis needs (target.forward for a vertical gaze, target.pgu)
-        return {"error": f"{e.field}: {e.message}"}
-    except (OpticsError, ChainError) as e:
-        return {"error": str(e)}
+    def make() -> dict:
+        try:
+            return report_block(analyse(scene, spot=False, compare_mesh=False, world=world))
+        except SceneError as e:  # a field the analysis needs (target.forward for a vertical gaze, target.pgu)
+            return {"error": f"{e.field}: {e.message}"}
+        except (OpticsError, ChainError) as e:
+            return {"error": str(e)}
+
+    return KEPT_BLOCKS.get(scene.scene_hash, make)

@@ -53,3 +53,39 @@ class Kept:
             while total > self.max_bytes:
                 _, dropped = self._entries.popitem(last=False)
                 total -= _nbytes(dropped)
+
+
+class KeptResults:
+    """Results of any kind by key, at most ``most`` of them (least recently used dropped first), for a
+    computation that depends only on what its key covers (a scene's hash, a seed): an analysis run again
+    on the same scene, F12 after F12 in Blender or a test suite's renders of one preset. ``copy`` makes
+    what a caller gets from what is kept (identity for results nobody changes: a photon map; a deep copy
+    for a report's block that a caller adds to). Safe across threads; two threads that miss one key at
+    once both compute it, and the later result is kept."""
+
+    def __init__(self, most: int, copy=None):
+        self.most = int(most)
+        self.copy = copy if copy is not None else (lambda value: value)
+        self._entries: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def get(self, key, make):
+        """What is kept under ``key``, or ``make()``'s result, kept (``copy`` of it either way)."""
+        with self._lock:
+            if key in self._entries:
+                self._entries.move_to_end(key)
+                return self.copy(self._entries[key])
+        made = make()
+        with self._lock:
+            self._entries[key] = made
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.most:
+                self._entries.popitem(last=False)
+        return self.copy(made)
+
+    def clear(self):
+        with self._lock:
+            self._entries.clear()

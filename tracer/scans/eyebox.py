@@ -118,14 +118,16 @@ class Field:
 
 
 def clear_lcd(scene: Scene) -> Scene:
-    """A copy of ``scene`` with every LCD cell clear (its slide made white); other objects shared."""
+    """A copy of ``scene`` with every LCD cell clear (its slide made white); other objects shared. Its hash
+    is the scene's marked, so that nothing kept by hash (tracer.core.kept) takes one for the other."""
     def clear(o):
         if o.material.type != "lcd":
             return o
         params = o.material.params | {"image": np.ones_like(o.material.params["image"])}
         return dataclasses.replace(o, material=dataclasses.replace(o.material, params=params))
 
-    return dataclasses.replace(scene, objects=[clear(o) for o in scene.objects])
+    return dataclasses.replace(scene, objects=[clear(o) for o in scene.objects],
+                               scene_hash=f"{scene.scene_hash}:lcd-clear")
 
 
 def display_field(world: World, photons=None, survey: dict | None = None) -> Field:
