@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 
 from ..presets._build import write_obj
-from ..tracer.core.imageio import write_exr
+from ..tracer.core.imageio import TEXTURE_ATTRIBUTES, write_exr
 from ..tracer.optics.materials import MATERIALS
 
 #: What an export folder holds; a folder holding anything else is not replaced (see check_replaceable).
@@ -122,7 +122,7 @@ def image_writer(image, what: str) -> tuple[str, Callable[[Path], None]]:
         image.pixels.foreach_get(px)
         px = px.reshape(h, w, image.channels)[::-1]  # Blender's row 0 is the bottom row
         rgb = px[..., :3] if image.channels >= 3 else np.repeat(px[..., :1], 3, axis=2)
-        write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+        write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]}, TEXTURE_ATTRIBUTES)
 
     return ".exr", write
 

@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 try:  # inside the Blender extension, presets and tracer are subpackages of the extension package
-    from ..tracer.core.imageio import read_image, write_exr
+    from ..tracer.core.imageio import TEXTURE_ATTRIBUTES, read_image, write_exr
     from ..tracer.core.units import luminance
     from ..tracer.sources.environment import panorama_rgb, row_solid_angle_fractions
 except ImportError:  # presets and tracer as top-level packages (command line, tests)
-    from tracer.core.imageio import read_image, write_exr
+    from tracer.core.imageio import TEXTURE_ATTRIBUTES, read_image, write_exr
     from tracer.core.units import luminance
     from tracer.sources.environment import panorama_rgb, row_solid_angle_fractions
 
@@ -123,5 +123,5 @@ def copy_panorama(source, destination) -> int:
     rgb = np.maximum(rgb, 0.0)
     destination = Path(destination)
     destination.parent.mkdir(parents=True, exist_ok=True)
-    write_exr(destination, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    write_exr(destination, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]}, TEXTURE_ATTRIBUTES)
     return negative

@@ -212,6 +212,12 @@ def _write_atomically(path, format_name: str, spec: oiio.ImageSpec, pixels: np.n
         tmp.unlink(missing_ok=True)
 
 
+#: The EXR header's DateTime of a scene's texture (:func:`write_exr`'s ``attributes``): OpenImageIO stamps
+#: the time of writing otherwise, and a scene exported or written again (F12 after F12) would get another
+#: hash (tracer.scene.load.scene_hash) for the same pixels, and lose what is kept by it (tracer.core.kept).
+TEXTURE_ATTRIBUTES = {"DateTime": "0000:00:00 00:00:00"}
+
+
 def write_exr(path, channels: dict[str, np.ndarray], attributes: dict | None = None) -> None:
     """Write named float channels to an OpenEXR file, atomically.
 

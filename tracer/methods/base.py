@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.film import Film, Splats, batch_arrays
+from ..core.kept import KeptResults
 from ..core.sampling import make_rng
 from ..core.units import luminance
 from ..scene.methods import MAX_DEPTH
@@ -42,6 +43,9 @@ PILOT_STREAM = 2**31 - 1
 PROBE_STREAM = 1
 #: Paths in a pilot.
 PILOT_PATHS = 1 << 14
+#: The roulette pilots' results by what they depend on (:attr:`Integrator.reference_luminance`): a few
+#: scenes' methods and seeds, in each process (the parent's, every worker's).
+KEPT_PILOTS = KeptResults(32)
 #: Replicates a pixel needs for its error bar (their spread); a render that stops with fewer says so.
 MIN_REPLICATES = 2
 #: With a budget in seconds and no batch size given, a batch is sized from the pilot's pace to take
@@ -235,20 +239,37 @@ class Integrator:
     def reference_luminance(self) -> float:
         """The roulette's reference (cd/m^2): the image's mean luminance estimated by a pilot of
         :data:`PILOT_PATHS` paths without roulette, on the seed's own pilot stream (the same in every
-        process, so batches stay seed-addressed)."""
+        process, so batches stay seed-addressed). The pilot depends on the scene (its hash), the eye,
+        the method, its options and the seed alone, so a process keeps it (:data:`KEPT_PILOTS`, with
+        what it set: :attr:`PILOT_STATE`, its warnings, its time and rays) for the next render of the
+        same (F12 after F12 in Blender, a worker's next render)."""
         if self._reference is None:
-            saved, truncated = self.batch_size, self.truncated
-            self.batch_size = PILOT_PATHS
-            rays0 = self.world.rays_traced
-            t0 = time.perf_counter()
-            try:
-                ctx = Context(self.world, make_rng(self.seed, PILOT_STREAM), Timers(), Splats(), None)
-                self._reference = self.pilot_mean(ctx)
-            finally:
-                self.batch_size, self.truncated = saved, truncated
-            self.pilot_seconds = time.perf_counter() - t0
-            self.pilot_rays = self.world.rays_traced - rays0
+            key = (self.scene.scene_hash, repr(self.eye.spec), self.world.exact_surfaces, type(self).__qualname__,
+                   self.seed, repr(sorted(self.opts.items())))
+            kept = KEPT_PILOTS.get(key, self._run_pilot)
+            self._reference, self.pilot_seconds, self.pilot_rays, state, warnings = kept
+            for name, value in state.items():
+                setattr(self, name, value)
+            self.warnings += [w for w in warnings if w not in self.warnings]
         return self._reference
+
+    #: The attributes a method's pilot sets besides the reference (kept and restored with it).
+    PILOT_STATE: tuple[str, ...] = ()
+
+    def _run_pilot(self) -> tuple:
+        """Run the pilot: (reference cd/m^2, its seconds, its rays, :attr:`PILOT_STATE`'s values, the
+        warnings it added)."""
+        saved, truncated, warned = self.batch_size, self.truncated, len(self.warnings)
+        self.batch_size = PILOT_PATHS
+        rays0 = self.world.rays_traced
+        t0 = time.perf_counter()
+        try:
+            ctx = Context(self.world, make_rng(self.seed, PILOT_STREAM), Timers(), Splats(), None)
+            reference = self.pilot_mean(ctx)
+        finally:
+            self.batch_size, self.truncated = saved, truncated
+        return (reference, time.perf_counter() - t0, self.world.rays_traced - rays0,
+                {name: getattr(self, name) for name in self.PILOT_STATE}, list(self.warnings[warned:]))
 
     def new_film(self) -> Film:
         """An empty film for this method's components (a batch's, or the render's)."""

@@ -82,6 +82,9 @@ class ForwardTracer(Integrator, PathMethod):
     efficiency_definition = "particles that reached the retina / particles emitted"
     found_what = "reached the retina"
 
+    #: What the pilot measures besides the reference: its efficiency (:meth:`pilot_mean`).
+    PILOT_STATE = ("pilot_efficiency",)
+
     def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)
         w = self.world

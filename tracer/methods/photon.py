@@ -494,6 +494,9 @@ class PhotonTracer(BackwardTracer):
     found_what = "found light (a source, a connection or a photon)"
     probed_paths = "photon paths"
 
+    #: What the pilot measures besides the reference: the initial radius, whence it came, the roulette scale.
+    PILOT_STATE = ("r0", "radius_from", "photon_scale")
+
     def __init__(self, world, seed, batch_size=None, options=None):
         super().__init__(world, seed, batch_size, options)
         self.alpha = float(self.opts["alpha"])
