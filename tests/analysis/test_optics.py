@@ -294,3 +294,26 @@ def test_a_screen_hud_s_analysis_from_the_render_s_world(tmp_path):
     alone = optics_block(scene, None)
     assert "error" not in with_world, with_world.get("error")
     assert with_world["design_eye"]["vid_mm"] == pytest.approx(alone["design_eye"]["vid_mm"], rel=1e-9)
+
+
+def test_the_renders_optics_block_is_kept_by_the_scenes_hash_and_handed_out_as_a_copy(preset, tmp_path):
+    """A render's optics block depends on the scene alone, so it is kept by the scene's hash
+    (tracer.analysis.optics.KEPT_BLOCKS): the same scene from another folder gets the block again (its own
+    copy: what one caller changes the next does not see), and an edited scene gets its own."""
+    import shutil
+
+    from tests.support.scenes import edit_json
+    from tracer.analysis.optics import KEPT_BLOCKS, optics_block
+
+    folder = preset("hud-direct", resolution=(20, 8))
+    again = shutil.copytree(folder, tmp_path / "again")
+    KEPT_BLOCKS.clear()
+    first = optics_block(load_scene(folder))
+    vid = first["design_eye"]["vid_mm"]
+    first["design_eye"]["vid_mm"] = -1.0  # a caller's change
+    second = optics_block(load_scene(again))
+    assert len(KEPT_BLOCKS) == 1 and second["design_eye"]["vid_mm"] == vid
+    edit_json(again, lambda d: d["eye"].update(position=[p + (20.0 if i == 2 else 0.0)
+                                                          for i, p in enumerate(d["eye"]["position"])]))
+    moved = optics_block(load_scene(again))
+    assert len(KEPT_BLOCKS) == 2 and moved["design_eye"]["vid_mm"] != vid

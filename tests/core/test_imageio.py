@@ -199,3 +199,23 @@ def test_write_png_rejects_bad_arrays(tmp_path):
     with pytest.raises(ValueError):
         write_png(tmp_path / "a.png", np.zeros((2, 2, 4), np.uint8))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_texture_written_again_later_is_the_same_file(tmp_path):
+    """Scene textures (Blender's export, the presets' panoramas) carry TEXTURE_ATTRIBUTES' fixed DateTime,
+    not the time of writing, so that a scene exported again a second later has the same hash and finds
+    what was kept by it (tracer.core.kept); without it the two files differ."""
+    import time
+
+    from tracer.core.imageio import TEXTURE_ATTRIBUTES, write_exr
+
+    rgb = {c: np.full((3, 4), v, np.float32) for c, v in zip("RGB", (0.25, 0.5, 1.0), strict=True)}
+    write_exr(tmp_path / "a.exr", rgb, TEXTURE_ATTRIBUTES)
+    write_exr(tmp_path / "plain_a.exr", rgb)
+    time.sleep(1.05)  # the DateTime's resolution is one second
+    write_exr(tmp_path / "b.exr", rgb, TEXTURE_ATTRIBUTES)
+    write_exr(tmp_path / "plain_b.exr", rgb)
+    assert (tmp_path / "a.exr").read_bytes() == (tmp_path / "b.exr").read_bytes()
+    assert (tmp_path / "plain_a.exr").read_bytes() != (tmp_path / "plain_b.exr").read_bytes()
+    _, attrs = read_exr_channels(tmp_path / "a.exr")
+    assert attrs["DateTime"] == TEXTURE_ATTRIBUTES["DateTime"]

@@ -147,8 +147,12 @@ def test_a_budget_met_by_one_replicate_ends_there_and_says_its_errors_are_unmeas
 
 
 def test_roulette_reference_comes_from_a_pilot_that_every_process_repeats(tmp_path, preset):
+    from tracer.methods.base import KEPT_PILOTS
+
     folder = preset("analytic-mirror")
+    KEPT_PILOTS.clear()
     a = INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance
+    KEPT_PILOTS.clear()  # run again, not taken from what this process kept
     b = INTEGRATORS["forward"](load_scene(folder), 3).reference_luminance
     assert a == b and a == pytest.approx(159.5, rel=0.1)
     edit_json(folder, lambda d: d["objects"][2]["emission"].update(luminance=0.0))
@@ -186,3 +190,44 @@ def test_the_steady_pace_is_the_rays_over_the_time_after_the_setup(mirror):
     res = render_parallel(INTEGRATORS["backward"](load_scene(mirror), 1), Budget(rays=20_000_000), workers=2)
     steady = res.extra["steady_rays_per_second"]
     assert res.rays / res.seconds <= steady <= res.rays / (res.seconds - res.extra["setup_seconds"]) * 1.001
+
+
+@pytest.mark.parametrize("method", ["backward", "forward", "photon"])
+def test_a_kept_pilot_renders_what_running_it_again_renders(preset, tmp_path, method):
+    """The roulette's pilot is kept by the scene's hash, the eye, the method, its options and the seed
+    (tracer.methods.base.KEPT_PILOTS): an integrator of the same scene loaded from another folder (F12
+    after F12) traces no pilot, takes the state the pilot set (the photon method's radius and roulette
+    scale, forward's pilot efficiency), and renders bit for bit what an integrator that ran its own
+    pilot renders."""
+    import shutil
+
+    from tracer.methods.base import KEPT_PILOTS
+
+    folder = preset("hud-direct", resolution=(20, 8))
+    again = shutil.copytree(folder, tmp_path / "again")
+    KEPT_PILOTS.clear()
+    ran = INTEGRATORS[method](load_scene(folder), 5)
+    first = ran.render(Budget(rays=60_000))
+    took = INTEGRATORS[method](load_scene(again), 5)
+    reference = took.reference_luminance
+    assert took.world.rays_traced == 0 and reference == ran.reference_luminance > 0  # no ray for the pilot
+    assert all(getattr(took, k) == getattr(ran, k) for k in type(took).PILOT_STATE), type(took).PILOT_STATE
+    second = took.render(Budget(rays=60_000))
+    assert np.array_equal(first.film.rgb(), second.film.rgb()) and first.rays == second.rays
+
+
+def test_auto_renders_the_same_image_when_its_roulette_pilots_are_kept(preset):
+    """A second auto render in the process, whose pilots' roulette pilots are kept, is the first bit for
+    bit: the same pilots' rays (the roulette pilot's counted whether traced or kept), the same method,
+    the same rays left to the render, the same image."""
+    from tracer.methods.base import KEPT_PILOTS
+
+    folder = preset("hud-direct", resolution=(20, 8))
+    KEPT_PILOTS.clear()
+    first = INTEGRATORS["auto"](load_scene(folder), 2).render(Budget(rays=400_000))
+    kept = len(KEPT_PILOTS)
+    second = INTEGRATORS["auto"](load_scene(folder), 2).render(Budget(rays=400_000))
+    assert kept > 0 and len(KEPT_PILOTS) == kept
+    assert first.rays == second.rays and np.array_equal(first.film.rgb(), second.film.rgb())
+    a, b = first.extra["channels"]["scene"], second.extra["channels"]["scene"]
+    assert a["method"] == b["method"] and [p["rays"] for p in a["pilots"]] == [p["rays"] for p in b["pilots"]]
