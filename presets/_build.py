@@ -142,12 +142,15 @@ def frame_matrix(origin, x_axis, normal) -> list[list[float]]:
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None):
     """Write a triangle mesh as Wavefront OBJ (with per-vertex texture coordinates if given)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    # Python numbers (tolist) format three times as fast as numpy scalars, to the same text: Blender
+    # writes every mesh so on each F12 (hud_addon/export_files.py)
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in np.asarray(vertices).tolist()]
+    one_based = (np.asarray(faces) + 1).tolist()
     if uv is not None:
-        lines += [f"vt {s:.9g} {t:.9g}" for s, t in uv]
-        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in faces]
+        lines += [f"vt {s:.9g} {t:.9g}" for s, t in np.asarray(uv).tolist()]
+        lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in one_based]
     else:
-        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+        lines += [f"f {a} {b} {c}" for a, b, c in one_based]
     path.write_text("\n".join(lines) + "\n")
 
 
