@@ -26,12 +26,18 @@ demo: $(STAMP)
 	$(VENV)/bin/hud-trace render hud-direct --method backward --seconds 60 --seed 1 --out out/hud-direct
 	$(VENV)/bin/hud-trace readouts out/hud-direct
 
+# Two pytest processes share the tests, a file at a time (pytest-xdist); the tests marked serial (wall-time
+# bounds, stop signals, every core in use) then run alone. More processes: make test PARALLEL="-n 4".
+PARALLEL ?= -n 2 --dist loadfile
+
 test: $(TEST_STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q $(PARALLEL) -m "not serial"
+	$(PY) -m pytest -q -m serial
 
 # The tests not marked slow: at most 3 minutes on 2 cores, for everyday work.
 test-quick: $(TEST_STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q $(PARALLEL) -m "not slow and not serial"
+	$(PY) -m pytest -q -m "not slow and serial"
 
 clean:
 	rm -rf $(VENV) out

@@ -161,6 +161,7 @@ def scenario_progressive(seconds):
             "updates": stub.updates, "threads_mode": scene.render.threads_mode, "cpus": os.cpu_count()}
 
 
+@pytest.mark.serial
 def test_a_render_in_blender_uses_every_core_and_shows_its_progress():
     """With Blender's default threads (auto-detect) a render runs on one process per
     core, and the Render Result is updated while it runs (at most once a second, after merged batches)."""

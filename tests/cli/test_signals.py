@@ -17,6 +17,8 @@ from tests.support.paths import ROOT
 from tracer import cli
 from tracer.core.imageio import read_exr_channels
 
+pytestmark = pytest.mark.serial  # stop signals to process groups, with hang guards in seconds
+
 
 def _start(scene, out, *extra):
     proc = subprocess.Popen([sys.executable, "-m", "tracer.cli", "render", str(scene), "--seconds", "300",

@@ -104,6 +104,7 @@ def test_noise_advice_fits_the_method():
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_a_time_budget_holds_on_a_machine_that_slows_down(preset):
     """A time budget holds on a loaded machine (--seconds 8 took 14 s when a budget always completed a
     whole batch of 131,072 paths). Batches are now sized from the pilot's pace to 2 % of the budget, so that

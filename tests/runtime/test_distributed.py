@@ -2,7 +2,7 @@
 
 import pytest
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.serial]  # a LocalCluster of several processes
 
 
 def test_dask_cluster_gives_the_same_image(preset):

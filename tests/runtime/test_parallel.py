@@ -12,6 +12,8 @@ from tests.support.paths import ROOT
 from tests.support.scenes import edit_json
 from tracer import cli
 
+pytestmark = pytest.mark.serial  # worker pools with deadlines in seconds
+
 
 def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_warned(mirror, earlier, monkeypatch):
     """Each worker holds the tracer, the scene and its own film: --workers 1000 spawned a thousand
