@@ -24,8 +24,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-os.environ["BLENDER_USER_RESOURCES"] = _USER = tempfile.mkdtemp(prefix="hud-bpy-user-")
-atexit.register(shutil.rmtree, _USER, ignore_errors=True)  # Blender's user resources: about 100 MB
+# Blender's user resources (about 100 MB) and the add-on's source repository, removed at exit
+_TMP = tempfile.mkdtemp(prefix="hud-f12-")
+atexit.register(shutil.rmtree, _TMP, ignore_errors=True)
+os.environ["BLENDER_USER_RESOURCES"] = str(Path(_TMP, "user"))
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402  (the environment above must be set first)
@@ -41,7 +43,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--renders", type=int, default=3)
     args = ap.parse_args()
-    module = enable_from_source(bpy, Path(tempfile.mkdtemp(prefix="hud-bpy-ext-")))
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp(dir=_TMP)))
     engine = sys.modules[f"{module}.hud_addon.engine"]
     bpy.ops.hud.add_preset(preset=args.preset)
     scene = bpy.context.scene

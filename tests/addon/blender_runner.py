@@ -16,10 +16,15 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-# Blender's user resources (about 100 MB once bpy starts): removed at exit, after the scenario's own exit
-# handlers (registered later, run first), or every scenario of every test run stays in the temp folder
-os.environ["BLENDER_USER_RESOURCES"] = _USER = tempfile.mkdtemp(prefix="hud-bpy-user-")
-atexit.register(shutil.rmtree, _USER, ignore_errors=True)
+# Every temp folder of the scenario (Blender's user resources, about 100 MB once bpy starts; the add-on's
+# source repository; an installed extension with its wheels, 34 MB; exported scenes) and of the worker
+# processes it starts goes into one folder, removed at exit, after the scenario's own exit handlers
+# (registered later, run first): every scenario of every test run had stayed in the temp folder (3.4 GB
+# of installed extensions after a day). A scenario's files that its test reads are in the test's tmp_path.
+tempfile.tempdir = _TMP = tempfile.mkdtemp(prefix="hud-scenario-")
+os.environ["TMPDIR"] = _TMP
+atexit.register(shutil.rmtree, _TMP, ignore_errors=True)
+os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="hud-bpy-user-")
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402, F401  (the environment above must be set first)

@@ -1,12 +1,17 @@
 """Rendering on a Dask cluster (tracer/runtime/distributed.py): the same image as one process."""
 
+import shutil
+from pathlib import Path
+
 import pytest
 
 pytestmark = [pytest.mark.slow, pytest.mark.serial]  # a LocalCluster of several processes
 
 
 def test_dask_cluster_gives_the_same_image(preset):
-    """The same seed-addressed batches on a Dask LocalCluster merge to the local image."""
+    """The same seed-addressed batches on a Dask LocalCluster merge to the local image. Each worker
+    unpacks the scene inside its own local directory, which it removes when it closes (a copy of every
+    scene rendered had stayed in the temp folder)."""
     distributed = pytest.importorskip("distributed")
     from tests.support.render import films_match
     from tracer.methods import INTEGRATORS, Budget
@@ -18,7 +23,38 @@ def test_dask_cluster_gives_the_same_image(preset):
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
     with cluster, distributed.Client(cluster) as client:
         dask = render_dask(INTEGRATORS["forward"](load_scene(folder), 4), Budget(rays=2_000_000), client)
+        places = client.run(_unpacked_and_local_directory)
     assert dask.batches == one.batches and films_match(one, dask)
+    assert len(places) == 2
+    for unpacked, local in places.values():
+        assert len(unpacked) == 1 and Path(unpacked[0]).parent == Path(local), (unpacked, local)
+
+
+def _unpacked_and_local_directory(dask_worker):
+    from tracer.runtime import distributed
+
+    return list(distributed._UNPACKED.values()), dask_worker.local_directory
+
+
+def test_a_worker_keeps_the_last_scenes_it_unpacked(preset, monkeypatch):
+    """A long-lived worker that renders a sweep's runs keeps only the last KEEP_UNPACKED scenes it
+    unpacked; a scene used again counts as the newest."""
+    from tracer.runtime import distributed
+
+    monkeypatch.setattr(distributed, "_UNPACKED", {})
+    blobs = []
+    for k in range(3):
+        folder = preset("analytic-mirror", resolution=(4 + k, 4))
+        blobs.append(distributed.pack_scene(folder))
+    first = distributed.unpacked(blobs[0], "a")
+    second = distributed.unpacked(blobs[1], "b")
+    assert distributed.unpacked(blobs[0], "a") == first  # used again: not unpacked twice
+    third = distributed.unpacked(blobs[2], "c")
+    assert distributed.KEEP_UNPACKED == 2 and list(distributed._UNPACKED) == ["a", "c"]
+    assert Path(first, "scene.json").is_file() and Path(third, "scene.json").is_file()
+    assert not Path(second).exists()
+    for folder in distributed._UNPACKED.values():
+        shutil.rmtree(folder)
 
 
 def test_the_command_line_renders_on_a_scheduler_the_same_image_and_set(preset, tmp_path):

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import io
+import shutil
 import tempfile
 import time
 import zipfile
@@ -31,7 +32,11 @@ from ..transport.world import World
 from .allocator import keep_freed_memory
 from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
 
+#: Scene folders unpacked on this worker, by the zip's digest, least recently used first.
 _UNPACKED: dict[str, str] = {}
+#: How many unpacked scenes a worker keeps: a long-lived worker that renders a sweep's runs had kept a
+#: copy of every run's scene in the temp folder.
+KEEP_UNPACKED = 2
 
 
 def pack_scene(folder) -> bytes:
@@ -51,15 +56,37 @@ def _batch_on_worker(blob: bytes, digest: str, method: str, seed: int, batch_siz
     key = (digest, method, seed, batch_size, repr(options), repr(eye))
     if _WORKER.get("key") != key:
         keep_freed_memory()  # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536: a batch took 4x as long
-        if digest not in _UNPACKED:
-            folder = Path(tempfile.mkdtemp(prefix="hud-dask-"))
-            with zipfile.ZipFile(io.BytesIO(blob)) as z:
-                z.extractall(folder)
-            _UNPACKED[digest] = str(folder)
-        world = World(load_scene(_UNPACKED[digest]), ThinLensEye(EyeSpec(**eye)))
+        world = World(load_scene(unpacked(blob, digest)), ThinLensEye(EyeSpec(**eye)))
         _WORKER["integrator"] = INTEGRATORS[method](world, seed, batch_size, options)
         _WORKER["key"] = key
     return _run_batch(index)
+
+
+def unpacked(blob: bytes, digest: str) -> str:
+    """The folder of the scene zipped in ``blob``: unpacked once into the Dask worker's local directory
+    (which the worker removes when it closes; the temp folder outside a worker), and removed again when
+    more than :data:`KEEP_UNPACKED` newer scenes have come since it was last used. The world built from
+    it has read what it needs (a batch reads no scene file), so an older folder goes safely."""
+    if digest in _UNPACKED:
+        _UNPACKED[digest] = _UNPACKED.pop(digest)  # used again: the newest
+        return _UNPACKED[digest]
+    folder = Path(tempfile.mkdtemp(prefix="hud-dask-", dir=_local_directory()))
+    with zipfile.ZipFile(io.BytesIO(blob)) as z:
+        z.extractall(folder)
+    _UNPACKED[digest] = str(folder)
+    while len(_UNPACKED) > KEEP_UNPACKED:
+        shutil.rmtree(_UNPACKED.pop(next(iter(_UNPACKED))), ignore_errors=True)
+    return str(folder)
+
+
+def _local_directory() -> str | None:
+    """The Dask worker's own local directory, or None (the temp folder) outside a worker."""
+    try:
+        from distributed import get_worker
+
+        return get_worker().local_directory
+    except (ImportError, ValueError):
+        return None
 
 
 class DaskExecutor:
