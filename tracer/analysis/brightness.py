@@ -183,7 +183,7 @@ def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = AN
     answer and the map are kept for the next analysis of the scene (:data:`KEPT_ANSWERS`, :func:`kept_map`)."""
     if photons <= 0:
         return None
-    key = (world.scene.scene_hash, repr(world.eye.spec), int(seed), min(photons, PILOT_PHOTONS))
+    key = (*world.key, int(seed), min(photons, PILOT_PHOTONS))
     if KEPT_ANSWERS.get(key, lambda: lit_through_optics(world, survey, seed, min(photons, PILOT_PHOTONS),
                                                         most=LISTED_PIXELS, stream=ANALYSIS_PILOT_STREAM)):
         return kept_map(world, photons, seed, ANALYSIS_STREAM)
@@ -194,8 +194,9 @@ def analysis_photon_map(world: World, survey: dict, seed: int, photons: int = AN
 #: after F12 in Blender, a test suite) builds its analysis' map once. A map holds no state between
 #: look-ups (tallies are the caller's), so one serves every analysis.
 KEPT_MAPS = KeptResults(2)
-#: :func:`lit_through_optics`'s answers for the analysis, by (scene hash, eye, seed, pilot particles): the
-#: survey it is asked about is the scene's chief rays from that eye, so the key covers what it depends on.
+#: :func:`lit_through_optics`'s answers for the analysis, by (the world's key: scene hash, eye, exact
+#: surfaces; seed, pilot particles): the survey it is asked about is the scene's chief rays from that eye,
+#: so the key covers what it depends on.
 KEPT_ANSWERS = KeptResults(64)
 
 

@@ -244,14 +244,18 @@ class Integrator:
         what it set: :attr:`PILOT_STATE`, its warnings, its time and rays) for the next render of the
         same (F12 after F12 in Blender, a worker's next render)."""
         if self._reference is None:
-            key = (self.scene.scene_hash, repr(self.eye.spec), self.world.exact_surfaces, type(self).__qualname__,
-                   self.seed, repr(sorted(self.opts.items())))
+            key = (*self.world.key, type(self).__qualname__, self.seed, repr(sorted(self.opts.items())))
             kept = KEPT_PILOTS.get(key, self._run_pilot)
             self._reference, self.pilot_seconds, self.pilot_rays, state, warnings = kept
             for name, value in state.items():
                 setattr(self, name, value)
             self.warnings += [w for w in warnings if w not in self.warnings]
         return self._reference
+
+    @property
+    def has_reference(self) -> bool:
+        """Whether this integrator has its roulette reference already (traced or kept)."""
+        return self._reference is not None
 
     #: The attributes a method's pilot sets besides the reference (kept and restored with it).
     PILOT_STATE: tuple[str, ...] = ()

@@ -216,7 +216,7 @@ def run_pilot(integrator: Integrator, method: str, seconds: float | None, rays: 
     (``seconds`` or ``rays``) is spent and its film holds enough replicates. ``in_rays``: the cost is
     counted in ray segments (a budget in rays), else in seconds."""
     t0 = time.perf_counter()
-    fresh = integrator._reference is None
+    fresh = not integrator.has_reference
     integrator.reference_luminance  # noqa: B018  (its roulette pilot: part of its cost)
     # its rays counted whether traced now or kept from an earlier render (tracer.methods.base.KEPT_PILOTS),
     # so that a budget in rays leaves the same to the render either way

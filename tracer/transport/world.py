@@ -67,6 +67,13 @@ class World:
         #: Ray segments of a world without geometry (they all escape at once; counted as traced).
         self.rays_without_geometry = 0
 
+    @property
+    def key(self) -> tuple:
+        """What everything traced in this world depends on, for results kept by it
+        (tracer.core.kept.KeptResults): the scene's hash, the eye's spec and whether hits are refined onto
+        exact surfaces."""
+        return self.scene.scene_hash, repr(self.eye.spec), self.exact_surfaces
+
     def _polarising_elements(self) -> list[str]:
         """What makes this world need Stokes vectors: objects whose material polarises
         (tracer.optics.bsdf.BSDF.polarising), polarised emitters, the eye's analyser; none with the
