@@ -323,6 +323,10 @@ def read_exr_rows(path, ybegin: int, yend: int) -> tuple[dict[str, np.ndarray], 
             {a.name: a.value for a in spec.extra_attribs})
 
 
+#: zlib level of the PNGs written (1 fastest, 9 smallest; OpenImageIO's default is 6).
+PNG_COMPRESSION_LEVEL = 1
+
+
 def write_png(path, rgb8: np.ndarray) -> None:
     """Write an 8-bit sRGB-encoded RGB image to a PNG file, atomically.
 
@@ -346,6 +350,8 @@ def write_png(path, rgb8: np.ndarray) -> None:
         raise ValueError(f"rgb8 must be a (H, W, 3) uint8 array, got {rgb8.dtype} {rgb8.shape}")
     spec = oiio.ImageSpec(rgb8.shape[1], rgb8.shape[0], 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
+    # zlib's fastest level: a 4K preview in 0.15 s instead of 0.4 s (level 6), files about 10 % larger
+    spec.attribute("png:compressionLevel", PNG_COMPRESSION_LEVEL)
     _write_atomically(path, "png", spec, np.ascontiguousarray(rgb8))
 
 

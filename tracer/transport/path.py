@@ -22,8 +22,10 @@ A method is an object with the hooks ``sensor``, ``escaped``, ``emitted``, ``con
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -445,6 +447,27 @@ def _hooked(method: PathMethod, hook: str) -> bool:
     return getattr(type(method), hook) is not getattr(PathMethod, hook)
 
 
+class BatchAbandoned(Exception):
+    """Raised by the path loop inside :func:`abandon_when` once its check is true."""
+
+
+#: The check of the enclosing :func:`abandon_when`, or None.
+_abandon: Callable[[], bool] | None = None
+
+
+@contextlib.contextmanager
+def abandon_when(check: Callable[[], bool]):
+    """Within the block, the path loop raises :class:`BatchAbandoned` at its next bounce once ``check()``
+    is true: a worker process's batch of a render that has ended, which nobody will merge
+    (tracer.runtime.parallel). A batch that runs to its end is the same as without the block."""
+    global _abandon
+    previous, _abandon = _abandon, check
+    try:
+        yield
+    finally:
+        _abandon = previous
+
+
 def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, probe: bool = True) -> int:
     """Run paths through the loop until they end or reach ``max_depth`` segments; returns the number
     of paths still alive at the limit (cut: a bias). With ``probe`` and a ``ctx.probe_rng``, the cut
@@ -460,6 +483,8 @@ def trace(method: PathMethod, state: PathState, ctx: Context, max_depth: int, pr
         n = len(state)
         if n == 0:
             return 0
+        if _abandon is not None and _abandon():
+            raise BatchAbandoned
         if accel is None:  # nothing but the environment (and perhaps the sensor)
             world.rays_without_geometry += n
             with timers("sensor"):
