@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.film import Film
-from ..core.units import luminance
+from ..core.units import luminance3
 from ..scene.methods import CANDIDATES
 from ..transport.path import CUT_KEY, PROBE_KEY, STILL_KEY
 from .base import (
@@ -366,11 +366,13 @@ class _Channels(Integrator):
                      "sources": [s for s, on in (("emitters", c.lights), ("environment", c.environment)) if on],
                      "pilots": [p.summary() for p in c.pilots]}
             if c.integrator is not None:
-                y = luminance(film.rgb(c.group))
+                # the channel's luminance summed over the film's layout (cd/m^2): the image's sum, without
+                # the (H, W) image (0.9 s at 4K); over every pixel, as the components' means are
+                y_sum = float(luminance3(film.layout_rgb(c.group)).sum())
                 figures = {k: extra.pop(f"channel_{k}:{c.name}", 0) for k in ("rays", "paths", "found", "seconds")}
                 entry |= figures | {"batch_size": c.integrator.batch_size, "every": c.every,
                                     "efficiency": figures["found"] / figures["paths"] if figures["paths"] else 0.0,
-                                    "mean_cd_m2": float(y.mean()),
+                                    "mean_cd_m2": y_sum / film.pixels,
                                     "mean_standard_error_cd_m2": film.mean_standard_error(c.group),
                                     "warnings": list(c.integrator.warnings)}
                 result.warnings += [f"{c.name} channel: {w}" for w in c.integrator.warnings]

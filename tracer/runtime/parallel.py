@@ -273,6 +273,7 @@ class WorkerPool:
         self.t0 = time.perf_counter()
         self.startup_seconds: float | None = None
         self.used = False  # whether a batch was ever handed to it
+        self._terminating: threading.Thread | None = None
 
     def poll_ready(self) -> int:
         """The workers that have started; RuntimeError when one could not, or a worker process exited
@@ -307,10 +308,19 @@ class WorkerPool:
         workers end on the pool's own sentinel after their batches. Set on close too, a stop signal
         to the process group that reached a worker inside a long C call (Embree, numpy) ran its handler
         after the parent had closed the pool: the worker exited mid-batch, the pool started another,
-        and the join waited forever for the lost batch (3 in 25 group SIGTERMs mid-render)."""
+        and the join waited forever for the lost batch (3 in 25 group SIGTERMs mid-render).
+
+        Pool.terminate() waits for the workers to exit, which workers still starting do only once they
+        are up (0.4 s of a 4K render's outputs, whose batches the parent had traced itself): with
+        ``wait`` false it runs in a thread of its own, which :meth:`join` waits for."""
         if terminate or not self.used:
             self.ending.set()
-            self.pool.terminate()
+            if wait:
+                self.pool.terminate()
+            else:
+                self._terminating = threading.Thread(target=self.pool.terminate, name="hud-pool-terminate",
+                                                     daemon=True)
+                self._terminating.start()
         else:
             self.pool.close()
         if wait:
@@ -323,6 +333,9 @@ class WorkerPool:
         a plain join waited for it forever. One still there after the grace is killed (its work is done);
         the pool's threads are then left to end with the process (daemons), and its exit-time terminate
         is called off: a killed worker may hold one of the queues' locks, which both would wait for."""
+        if self._terminating is not None:  # terminated in a thread of its own (:meth:`close`)
+            self._terminating.join()
+            return
         pool = self.pool
         workers = list(pool._pool)  # noqa: SLF001  (the pool's processes: a private attribute, stable)
         while pool._cache and any(p.exitcode is None for p in workers):  # noqa: SLF001  (batches still out)
