@@ -124,6 +124,8 @@ def _job_integrator(job: tuple):
                                    "disk since, or edited in memory: workers load the folder)")
             integrator = INTEGRATORS[method](World(scene, ThinLensEye(EyeSpec(**eye))), seed, batch_size, options)
             integrator.reference_luminance  # noqa: B018  (the pilot)
+        except BatchAbandoned:  # its render ended during the pilot (_run_job_batch)
+            raise
         except Exception as e:  # noqa: BLE001 - said to the parent in one line
             raise RuntimeError(f"a worker process could not start: {type(e).__name__}: {e}") from None
         _WORKER["integrator"], _WORKER["job"] = integrator, key
@@ -156,10 +158,9 @@ def _run_job_batch(job: tuple, index: int, render: int):
     over = (lambda: _ENDED.value > render) if _ENDED is not None else (lambda: False)
     if over():
         return None
-    integrator = _job_integrator(job)
     try:
-        with abandon_when(over):
-            return integrator.trace_batch(index)
+        with abandon_when(over):  # the world's pilot too, on the worker's first batch of the render
+            return _job_integrator(job).trace_batch(index)
     except BatchAbandoned:
         return None
 
