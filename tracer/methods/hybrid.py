@@ -366,8 +366,8 @@ class _Channels(Integrator):
                      "sources": [s for s, on in (("emitters", c.lights), ("environment", c.environment)) if on],
                      "pilots": [p.summary() for p in c.pilots]}
             if c.integrator is not None:
-                # the channel's luminance summed over the film's layout (cd/m^2): the image's sum, without
-                # the (H, W) image (0.9 s at 4K); over every pixel, as the components' means are
+                # the channel's luminance summed over the film's layout (cd/m^2): the image's sum without
+                # making the (H, W) image; divided by every pixel, as the components' means are
                 y_sum = float(luminance3(film.layout_rgb(c.group)).sum())
                 figures = {k: extra.pop(f"channel_{k}:{c.name}", 0) for k in ("rays", "paths", "found", "seconds")}
                 entry |= figures | {"batch_size": c.integrator.batch_size, "every": c.every,

@@ -153,8 +153,8 @@ def _run_batch(index: int):
 
 def _run_job_batch(job: tuple, index: int, render: int):
     """Batch ``index`` of render number ``render`` of the pool, or None where that render has ended
-    before the batch began or while it ran (its batches are no longer merged: a worker that went on
-    took a core from the parent writing the outputs, 0.8 s of CPU after a 2 s render at 4K)."""
+    before the batch began or while it ran: its batches are no longer merged, and a worker that went on
+    took a core from the parent writing the outputs (docs/results/speed.md, a budget at any size)."""
     over = (lambda: _ENDED.value > render) if _ENDED is not None else (lambda: False)
     if over():
         return None
@@ -312,8 +312,8 @@ class WorkerPool:
         and the join waited forever for the lost batch (3 in 25 group SIGTERMs mid-render).
 
         Pool.terminate() waits for the workers to exit, which workers still starting do only once they
-        are up (0.4 s of a 4K render's outputs, whose batches the parent had traced itself): with
-        ``wait`` false it runs in a thread of its own, which :meth:`join` waits for."""
+        are up (a short render whose batches the parent traced itself waited for them before its
+        outputs): with ``wait`` false it runs in a thread of its own, which :meth:`join` waits for."""
         if terminate or not self.used:
             self.ending.set()
             if wait:
