@@ -102,10 +102,19 @@ class StopFlag:
     is whole."""
 
     def __init__(self):
+        from .products.outputs import committed
+
         self.stop = False
+        self._committed = committed()
 
     def __call__(self) -> bool:
         return self.stop
+
+    def written(self) -> bool:
+        """Whether an output set has been moved into place since this flag was made (by its command)."""
+        from .products.outputs import committed
+
+        return committed() > self._committed
 
     def handler(self, signum, frame):
         from .products.outputs import writing
@@ -183,16 +192,21 @@ def _resolve_scene(arg: str, tmp: Path) -> Path:
     raise SceneError(arg, "", f"neither a scene folder nor a preset (presets: {', '.join(PRESETS)})")
 
 
-def _write_errors(e: BaseException, out) -> int:
+def _write_errors(e: BaseException, out, written: bool = False) -> int:
     """One line on stderr and the exit status of a command that writes an output set into ``out``, for
     the errors it ends with: the folder cannot take the set, or a value overflows (2); the writing
-    failed (4: the folder keeps its earlier set); a second Ctrl-C (5); other I/O, such as a preset's
-    temporary scene folder on a full disk (4)."""
+    failed (4: the folder keeps its earlier set); a second Ctrl-C (5), or 130 where it came once the
+    command's set was in place (``written``: its analysis is what stopped); other I/O, such as a
+    preset's temporary scene folder on a full disk (4)."""
     from .products.outputs import OutputFolderError
 
     if isinstance(e, OutputFolderError | EstimateOverflowError):
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
+    if isinstance(e, KeyboardInterrupt) and written:
+        print(f"aborted after the outputs were written: {out} holds them (report.json says whether its analysis "
+              "was done)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if isinstance(e, KeyboardInterrupt):
         print(f"aborted: nothing written; {out} keeps what it held", file=sys.stderr)
         return EXIT_ABORTED
@@ -252,7 +266,7 @@ def cmd_render(args) -> int:
         print(f"{e}: nothing written; {args.out} keeps what it held", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
-        return _write_errors(e, args.out)
+        return _write_errors(e, args.out, flag.written())
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

@@ -73,6 +73,40 @@ def test_a_second_ctrl_c_aborts_with_its_own_status_and_one_line(mirror, earlier
     assert hashes(out) == before
 
 
+def test_a_second_ctrl_c_after_the_set_is_written_says_so(mirror, earlier, monkeypatch):
+    """The first interrupt stops the render; the second lands once its partial set is in place (sent here
+    as the render keeps the folder it wrote). It said "aborted: nothing written; ... keeps what it held" with exit 5,
+    while the folder held the new partial set (seen once from outside, in a CI run). Now: exit 130, one
+    line saying the folder holds the outputs, the partial set whole."""
+    from tracer.products import outputs
+
+    out, before = earlier
+    sent = []
+
+    class Interrupting:
+        def __call__(self, fraction, message):
+            if not sent:
+                sent.append(True)
+                os.kill(os.getpid(), signal.SIGINT)
+
+        def close(self):
+            pass
+
+    keep = outputs.OutputSet.keep
+
+    def kept_then_interrupted(self):
+        keep(self)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(cli, "ProgressBar", Interrupting)
+    monkeypatch.setattr(outputs.OutputSet, "keep", kept_then_interrupted)
+    code, err = run_cli("render", mirror, "--seconds", 60, "--workers", 1, "--out", out)
+    assert sent and code == 130, err
+    assert "Traceback" not in err and "nothing written" not in err
+    assert err.strip().splitlines()[-1].startswith("aborted after the outputs were written")
+    assert hashes(out) != before and assert_complete_set(out)["partial"] is True
+
+
 @pytest.mark.slow
 def test_a_second_ctrl_c_from_outside_never_leaves_a_traceback_or_a_mixed_set(mirror, earlier):
     """The same from outside, with two workers: depending on when the second signal lands, the render

@@ -165,3 +165,30 @@ def test_pilots_of_a_large_retina_run_on_a_coarser_one_of_the_same_field(tmp_pat
     assert coarse.width * coarse.height <= PILOT_PIXELS and (coarse.width, coarse.height) == (341, 192)
     assert np.array_equal(coarse.spec.fov_deg, large.eye.spec.fov_deg)
     assert np.array_equal(coarse.spec.position, large.eye.spec.position)
+
+
+@pytest.mark.slow
+def test_the_survey_behind_applicable_is_made_once_per_scene_and_eye(preset, tmp_path, monkeypatch):
+    """auto and hybrid ask on every render whether a specular object blocks the emitters' light to a
+    scattering surface in view (a chief-ray survey through the brightness theorem's chains, which at 4K
+    took most of a 2 s budget); F12 after F12 in Blender asked again. The answer is kept by the world's
+    key now: the same scene loaded from another folder gets it without a survey; another scene makes
+    its own."""
+    import shutil
+
+    from tracer.methods import pilots
+    from tracer.transport.world import World
+
+    pilots.KEPT_BLOCKED.clear()
+    surveys = []
+    survey = pilots.specular_paths
+    monkeypatch.setattr(pilots, "specular_paths", lambda *a, **k: surveys.append(1) or survey(*a, **k))
+    screen = preset("hud-screen")
+    copy = shutil.copytree(screen, tmp_path / "copy")
+    first = applicable(World(load_scene(screen)), lights=True, environment=False)
+    again = applicable(World(load_scene(copy)), lights=True, environment=False)
+    assert first == again and first["photon"] is None and len(surveys) == 1
+    direct = applicable(World(load_scene(preset("hud-direct"))), lights=True, environment=False)
+    assert len(surveys) == 2
+    pilots.KEPT_BLOCKED.clear()
+    assert applicable(World(load_scene(preset("hud-direct"))), lights=True, environment=False) == direct

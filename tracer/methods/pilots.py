@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..core.kept import KeptResults
 from ..core.units import luminance
 from ..transport.chains import specular_paths
 from .base import DEFAULT_BATCH, SMALLEST_BATCH, Integrator
@@ -116,9 +117,17 @@ def applicable(world, lights: bool, environment: bool) -> dict[str, str | None]:
         out["photon"] = "the photon method does not carry environment light (the hybrid method gives it a channel)"
         return out
     out["forward"] = None
-    blockers = specular_paths(world, environment=False)["specular_blockers"] if world.accel is not None else {}
-    out["photon"] = None if blockers else PHOTON_NOT_NEEDED
+    blocked = world.accel is not None and KEPT_BLOCKED.get(
+        (*world.key, len(world.lights)), lambda: bool(specular_paths(world, environment=False)["specular_blockers"]))
+    out["photon"] = None if blocked else PHOTON_NOT_NEEDED
     return out
+
+
+#: Whether a specular object blocks the emitters' light to a scattering surface in view, by the world's
+#: key (and its emitters): the chief-ray survey behind :func:`applicable` is the scene's and the eye's
+#: alone, and it costs a second at large retinas, so auto and hybrid ask it once per scene and eye in a
+#: process (F12 after F12 in Blender).
+KEPT_BLOCKED = KeptResults(16)
 
 
 #: Why the pilots leave the photon method out where next-event estimation reaches every scattering

@@ -47,6 +47,13 @@ except ImportError:  # pragma: no cover - Windows
 STAGING_PREFIX = ".hud-staging-"
 
 _writing = False
+_committed = 0
+
+
+def committed() -> int:
+    """How many output sets this process has moved into place: a second stop signal that comes after a
+    command's set was moved there aborts what follows (the analysis), not the set, which is whole."""
+    return _committed
 
 
 def writing() -> bool:
@@ -225,6 +232,7 @@ class OutputSet:
 
     def _swap(self, staging: Path, names: list[str]):
         """Move the staged files onto the targets; on failure put back what was there."""
+        global _committed
         backups: dict[str, Path | None] = {}
         try:
             for name in names:
@@ -250,6 +258,7 @@ class OutputSet:
                     pass
             raise OutputWriteError(self.folder, f"moving the outputs into place failed ({e}); the earlier outputs "
                                                 "are kept") from None
+        _committed += 1
 
     # -- always ----------------------------------------------------------------------------------
     def close(self):
