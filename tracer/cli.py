@@ -60,8 +60,20 @@ def _process_start() -> float:
     return now - age if 0.0 <= age < 60.0 else now
 
 
-#: When the command began: a render's --seconds count from here.
-STARTED = _process_start()
+#: When this process began (:func:`_process_start`), and when this module was imported.
+STARTED, _IMPORTED = _process_start(), time.perf_counter()
+#: Commands run by :func:`main` in this process so far.
+_COMMANDS = [0]
+
+
+def _command_start() -> float:
+    """When the command that :func:`main` begins started, for a render's --seconds: the process's start
+    where it is the process's first command, begun as this module was imported (the console script:
+    the interpreter's start and the imports count), else now (a host program or a test calling
+    :func:`main`: a budget had counted from the process's start, and was spent before such a render began)."""
+    now = time.perf_counter()
+    _COMMANDS[0] += 1
+    return STARTED if _COMMANDS[0] == 1 and now - _IMPORTED < 1.0 else now
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Limits of the render arguments (beyond them a render cannot be meant).
 MAX_SECONDS = 1e7
@@ -232,7 +244,7 @@ def cmd_render(args) -> int:
         return EXIT_INPUT
     keep_freed_memory()
     # --seconds count from the command's start (loading the scene included); each eye of a pair has its own
-    budget = Budget(rays=args.rays, seconds=args.seconds, since=STARTED if args.eye != "both" else None)
+    budget = Budget(rays=args.rays, seconds=args.seconds, since=args.started if args.eye != "both" else None)
     flag = StopFlag()
     previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
     bar = None if args.quiet else ProgressBar()
@@ -820,10 +832,12 @@ def _import_holding_interrupts() -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
+    started = _command_start()
     try:
         if _import_holding_interrupts():
             raise KeyboardInterrupt
         args = build_parser().parse_args(argv)  # the parser lists the methods: it imports them
+        args.started = started
         return args.func(args)
     except (SceneError, ArgumentError) as e:
         print(f"error: {e}", file=sys.stderr)

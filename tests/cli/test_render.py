@@ -119,3 +119,21 @@ def test_version_seed_help_and_auto_naming_its_choice(tmp_path, capsys):
                         "--quiet", "--out", tmp_path / "o")
     assert code == 0, err
     assert "auto (chose backward):" in err
+
+
+def test_a_command_run_later_in_a_process_gets_its_whole_time_budget(mirror, tmp_path, monkeypatch):
+    """--seconds count from the command's start: for the console script, the process's start (its
+    imports count); for main() called by a host program or a test an hour into the process, from the
+    call. It counted from the process's start there too, so such a render found its budget spent and
+    stopped after one batch."""
+    import time
+
+    from tracer import cli
+
+    monkeypatch.setattr(cli, "STARTED", time.perf_counter() - 3600.0)  # the process and its import, an hour ago
+    monkeypatch.setattr(cli, "_IMPORTED", time.perf_counter() - 3600.0)
+    out = tmp_path / "o"
+    code, err = run_cli("render", mirror, "--seconds", 1, "--workers", 1, "--quiet", "--out", out)
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert 0.9 <= report["seconds"] < 30 and report["batches"] > 1, (report["seconds"], report["batches"])

@@ -300,9 +300,12 @@ class WorkerPool:
 
     def close(self, terminate: bool = False, wait: bool = True):
         """End the workers: let them finish what they hold (at most two batches each) and exit, or (an
-        error, an abort; a pool never used) terminate them. Pool.terminate() after batches were handed
-        out can hang in CPython's task handler (waiting for the inqueue's lock, never released), so a
-        pool in use is closed and joined. ``wait`` false: the workers exit on their own while this
+        error, an abort; a pool never used that nothing waits for) terminate them. Pool.terminate() can
+        hang: in CPython's task handler after batches were handed out (waiting for the inqueue's lock,
+        never released), and in its join of a worker blocked on the task queue's lock that a sibling
+        ended by the terminate held (seen at Blender's unregister, with a pool never used). So a pool
+        is closed and joined where something waits, and a terminate runs in a thread of its own that
+        :meth:`join` waits for a bounded time. ``wait`` false: the workers exit on their own while this
         process goes on (:func:`close_shared_pool` joins them later).
 
         ``ending`` (the workers' SIGTERM ends them again) is set only to terminate: a closed pool's
@@ -311,17 +314,13 @@ class WorkerPool:
         after the parent had closed the pool: the worker exited mid-batch, the pool started another,
         and the join waited forever for the lost batch (3 in 25 group SIGTERMs mid-render).
 
-        Pool.terminate() waits for the workers to exit, which workers still starting do only once they
-        are up (a short render whose batches the parent traced itself waited for them before its
-        outputs): with ``wait`` false it runs in a thread of its own, which :meth:`join` waits for."""
-        if terminate or not self.used:
+        Pool.terminate() also waits for workers still starting to come up (a short render whose batches
+        the parent traced itself waited for them before its outputs)."""
+        if terminate or (not self.used and not wait):
             self.ending.set()
-            if wait:
-                self.pool.terminate()
-            else:
-                self._terminating = threading.Thread(target=self.pool.terminate, name="hud-pool-terminate",
-                                                     daemon=True)
-                self._terminating.start()
+            self._terminating = threading.Thread(target=self.pool.terminate, name="hud-pool-terminate",
+                                                 daemon=True)
+            self._terminating.start()
         else:
             self.pool.close()
         if wait:
@@ -335,7 +334,12 @@ class WorkerPool:
         the pool's threads are then left to end with the process (daemons), and its exit-time terminate
         is called off: a killed worker may hold one of the queues' locks, which both would wait for."""
         if self._terminating is not None:  # terminated in a thread of its own (:meth:`close`)
-            self._terminating.join()
+            self._terminating.join(JOIN_GRACE)
+            if self._terminating.is_alive():  # a worker blocked where its SIGTERM handler never runs
+                for p in list(self.pool._pool):  # noqa: SLF001
+                    if p.exitcode is None:
+                        p.kill()
+                self._terminating.join(JOIN_GRACE)
             return
         pool = self.pool
         workers = list(pool._pool)  # noqa: SLF001  (the pool's processes: a private attribute, stable)
