@@ -325,3 +325,34 @@ def test_the_workers_abandon_the_batches_of_a_render_that_ended(mirror):
     closing = time.monotonic() - t0
     assert result.batches == 1 and result.rays > 1_000_000
     assert closing < 0.5 * result.seconds, (closing, result.seconds)
+
+
+def test_a_terminated_pool_is_waited_for_a_bounded_time_even_when_a_worker_hangs():
+    """Pool.terminate() joins every worker without a time limit: Blender's unregister hung in it on a worker
+    blocked on the task queue's lock, which its sibling, ended by the terminate, held. A terminate now runs
+    in a thread that the pool's join waits for JOIN_GRACE, then kills the workers: a worker stopped with
+    SIGSTOP (which its SIGTERM cannot end) no longer holds it up."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from tracer.runtime.parallel import JOIN_GRACE, WorkerPool
+
+    pool = WorkerPool(2)
+    try:
+        deadline = time.monotonic() + 120
+        while pool.poll_ready() < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(pool.pool._pool[0].pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        closing = threading.Thread(target=pool.close, kwargs={"terminate": True}, daemon=True)
+        closing.start()
+        closing.join(timeout=60)
+        assert not closing.is_alive(), "the terminate waited for the stopped worker"
+        assert time.monotonic() - t0 < 2 * JOIN_GRACE + 20
+        assert all(p.exitcode is not None for p in pool.pool._pool)
+    finally:
+        for p in pool.pool._pool:
+            if p.exitcode is None:
+                p.kill()
