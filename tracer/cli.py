@@ -63,7 +63,7 @@ def _process_start() -> float:
 #: When this process began (:func:`_process_start`), and when this module was imported.
 STARTED, _IMPORTED = _process_start(), time.perf_counter()
 #: Commands run by :func:`main` in this process so far.
-_COMMANDS = [0]
+_commands = 0
 
 
 def _command_start() -> float:
@@ -71,9 +71,10 @@ def _command_start() -> float:
     where it is the process's first command, begun as this module was imported (the console script:
     the interpreter's start and the imports count), else now (a host program or a test calling
     :func:`main`: a budget had counted from the process's start, and was spent before such a render began)."""
+    global _commands
     now = time.perf_counter()
-    _COMMANDS[0] += 1
-    return STARTED if _COMMANDS[0] == 1 and now - _IMPORTED < 1.0 else now
+    _commands += 1
+    return STARTED if _commands == 1 and now - _IMPORTED < 1.0 else now
 EXIT_INPUT, EXIT_NO_LIGHT, EXIT_WRITE, EXIT_ABORTED, EXIT_INTERRUPTED = 2, 3, 4, 5, 130
 #: Limits of the render arguments (beyond them a render cannot be meant).
 MAX_SECONDS = 1e7

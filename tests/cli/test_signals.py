@@ -48,24 +48,30 @@ def test_a_stop_signal_saves_a_partial_result_promptly(mirror, tmp_path, sig):
     assert waited < 20, waited  # a hang guard, not a measurement of the time
 
 
+def _interrupting_bar(sent: list, interrupts: int):
+    """A progress bar for cmd_render that sends this process ``interrupts`` SIGINTs at its first call
+    (so that they arrive while rays are traced), and notes in ``sent`` that it did."""
+
+    class Interrupting:
+        def __call__(self, fraction, message):
+            if not sent:
+                sent.append(True)
+                for _ in range(interrupts):
+                    os.kill(os.getpid(), signal.SIGINT)
+
+        def close(self):
+            pass
+
+    return Interrupting
+
+
 def test_a_second_ctrl_c_aborts_with_its_own_status_and_one_line(mirror, earlier, monkeypatch):
     """Two interrupts during a render (sent by the progress callback, so that they arrive while rays
     are traced): exit 5, one line, the earlier outputs kept. It was a KeyboardInterrupt traceback with
     the status of a saved partial result."""
     out, before = earlier
     sent = []
-
-    class Interrupting:
-        def __call__(self, fraction, message):
-            if not sent:
-                sent.append(True)
-                os.kill(os.getpid(), signal.SIGINT)
-                os.kill(os.getpid(), signal.SIGINT)
-
-        def close(self):
-            pass
-
-    monkeypatch.setattr(cli, "ProgressBar", Interrupting)
+    monkeypatch.setattr(cli, "ProgressBar", _interrupting_bar(sent, interrupts=2))
     code, err = run_cli("render", mirror, "--seconds", 60, "--workers", 1, "--out", out)
     assert sent and code == 5, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
@@ -82,23 +88,13 @@ def test_a_second_ctrl_c_after_the_set_is_written_says_so(mirror, earlier, monke
 
     out, before = earlier
     sent = []
-
-    class Interrupting:
-        def __call__(self, fraction, message):
-            if not sent:
-                sent.append(True)
-                os.kill(os.getpid(), signal.SIGINT)
-
-        def close(self):
-            pass
-
     keep = outputs.OutputSet.keep
 
     def kept_then_interrupted(self):
         keep(self)
         os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr(cli, "ProgressBar", Interrupting)
+    monkeypatch.setattr(cli, "ProgressBar", _interrupting_bar(sent, interrupts=1))
     monkeypatch.setattr(outputs.OutputSet, "keep", kept_then_interrupted)
     code, err = run_cli("render", mirror, "--seconds", 60, "--workers", 1, "--out", out)
     assert sent and code == 130, err

@@ -15,6 +15,15 @@ from tracer import cli
 pytestmark = pytest.mark.serial  # worker pools with deadlines in seconds
 
 
+def _wait_until_started(pool, seconds: float = 120.0):
+    """Wait (at most ``seconds``) until every worker of ``pool`` has started."""
+    import time
+
+    deadline = time.monotonic() + seconds
+    while pool.poll_ready() < pool.workers and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
 def test_more_workers_than_the_memory_holds_are_refused_and_more_than_the_cpus_warned(mirror, earlier, monkeypatch):
     """Each worker holds the tracer, the scene and its own film: --workers 1000 spawned a thousand
     processes (about 130 MiB each) on a 24 GiB machine. Workers whose memory together passes half of
@@ -190,9 +199,7 @@ def test_a_stop_signal_that_reaches_a_closing_pools_worker_late_loses_no_batch()
 
     pool = WorkerPool(2)
     try:
-        deadline = time.monotonic() + 120
-        while pool.poll_ready() < 2 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        _wait_until_started(pool)
         assert pool.ready == 2
         pids = {p.pid for p in pool.pool._pool}
         pool.used = True
@@ -281,9 +288,7 @@ def test_a_closed_pool_joins_even_when_a_worker_hangs():
 
     pool = WorkerPool(2)
     try:
-        deadline = time.monotonic() + 120
-        while pool.poll_ready() < 2 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        _wait_until_started(pool)
         pool.used = True
         assert all(b.get(timeout=60) is None for b in [pool.pool.apply_async(time.sleep, (0.01,)) for _ in range(4)])
         os.kill(pool.pool._pool[0].pid, signal.SIGSTOP)
@@ -315,9 +320,7 @@ def test_the_workers_abandon_the_batches_of_a_render_that_ended(mirror):
 
     close_shared_pool()
     pool = shared_pool(2)
-    deadline = time.monotonic() + 120
-    while pool.poll_ready() < 2 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _wait_until_started(pool)
     integrator = INTEGRATORS["forward"](load_scene(mirror), 1, 2_000_000)
     result = render_parallel(integrator, Budget(rays=1), 2)
     t0 = time.monotonic()
@@ -341,9 +344,7 @@ def test_a_terminated_pool_is_waited_for_a_bounded_time_even_when_a_worker_hangs
 
     pool = WorkerPool(2)
     try:
-        deadline = time.monotonic() + 120
-        while pool.poll_ready() < 2 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        _wait_until_started(pool)
         os.kill(pool.pool._pool[0].pid, signal.SIGSTOP)
         t0 = time.monotonic()
         closing = threading.Thread(target=pool.close, kwargs={"terminate": True}, daemon=True)
