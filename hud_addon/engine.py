@@ -30,7 +30,7 @@ import bpy
 import numpy as np
 
 from ..tracer.analysis.aims import aim_preflight
-from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerError
+from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerError, one_line
 from ..tracer.core.units import Y_WEIGHTS
 from ..tracer.core.validate import WorkersError, check_workers
 from ..tracer.methods import INTEGRATORS, Budget
@@ -251,7 +251,9 @@ def render_final(engine, depsgraph) -> dict:
             return _fail(engine, scene, f"{e}: nothing rendered", "stopped")
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
-            return _fail(engine, scene, str(e))
+            where = "" if scheduler is None or isinstance(e, TracerError) else \
+                f"Render Properties > HUD Tracer > Dask Scheduler {scheduler}: "
+            return _fail(engine, scene, where + one_line(e))
         except Exception as e:  # a fault of the tracer: the result is ended (Blender crashes on an open one)
             engine.end_result(rr)
             traceback.print_exc()

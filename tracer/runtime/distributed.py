@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import io
+import pickle
 import shutil
 import tempfile
 import time
@@ -29,8 +30,13 @@ from ..methods.base import drive
 from ..scene import EyeSpec, load_scene
 from ..transport.eye import ThinLensEye
 from ..transport.world import World
+from . import dask_task
 from .allocator import keep_freed_memory
 from .parallel import _WORKER, _run_batch  # noqa: F401  (the workers' cache is shared)
+
+#: The tracer's import name in this process ("tracer"; inside Blender a subpackage of the add-on, which
+#: Dask workers know as "tracer": tracer.runtime.dask_task carries the batches between the two names).
+PACKAGE = __name__.rsplit(".", 2)[0]
 
 #: Scene folders unpacked on this worker, by the zip's digest, least recently used first.
 _UNPACKED: dict[str, str] = {}
@@ -90,7 +96,8 @@ def _local_directory() -> str | None:
 
 
 class DaskExecutor:
-    """The driver's executor over a Dask client: futures, waited for with FIRST_COMPLETED."""
+    """The driver's executor over a Dask client: futures, waited for with FIRST_COMPLETED, each a
+    batch's result pickled by tracer.runtime.dask_task.run."""
 
     def __init__(self, client, submit, workers: int):
         self.client, self._submit, self.workers = client, submit, workers
@@ -109,7 +116,7 @@ class DaskExecutor:
         return [futures[f] for f in done]
 
     def result(self, handle):
-        return handle.result()
+        return dask_task.result(handle.result(), PACKAGE)
 
 
 #: Seconds to wait for a scheduler to answer.
@@ -165,11 +172,12 @@ def render_dask(local, budget: Budget, client, in_flight: int | None = None, pro
     digest = hashlib.sha256(blob).hexdigest()
     [blob_future] = client.scatter([blob], broadcast=True)
     workers = max(1, len(client.scheduler_info().get("workers", {})))
-    args = (blob_future, digest, local.name, local.seed, local.batch_size, local.worker_options(),
-            dataclasses.asdict(local.eye.spec))
+    arguments = pickle.dumps((digest, local.name, local.seed, local.batch_size, local.worker_options(),
+                              dataclasses.asdict(local.eye.spec)), protocol=5)
+    task = dask_task.task(PACKAGE)
 
     def submit(k):
-        return client.submit(_batch_on_worker, *args, k, pure=False,
+        return client.submit(task, PACKAGE, blob_future, arguments, k, pure=False,
                              key=f"hud-batch-{digest[:12]}-{local.name}-{local.seed}-{local.batch_size}-{k}")
 
     result = drive(local, budget, DaskExecutor(client, submit, workers), in_flight or 2 * workers, progress,
