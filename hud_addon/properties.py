@@ -8,6 +8,7 @@ new material or option needs no change here."""
 import dataclasses
 
 import bpy
+import numpy as np
 from bpy.props import (
     BoolProperty,
     EnumProperty,
@@ -26,7 +27,7 @@ from ..tracer.scene import ANALYSER, POLARISATION_MODES
 from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
 from ..tracer.sources.sun import SUN_ILLUMINANCE_LX
-from .schema_ui import annotations
+from .schema_ui import annotations, starting_values
 from .units import angle_twin, length_twin
 
 
@@ -167,11 +168,32 @@ def _per_role_descriptions() -> dict[str, str]:
             for name, by_text in meanings.items() if len(by_text) > 1}  # the tooltip adds the last full stop
 
 
+#: The values each role's numbers and colours start from in the panel, by role.
+ROLE_STARTS = {name: starting_values(cls.schema.fields) for name, cls in MATERIALS.items()}
+
+
+def _role_changed(self, context):
+    """Give the role just chosen its own starting values where the object still holds those of the role
+    before it (or the properties' defaults): roles share their properties by name (one Reflectance for
+    all), and a coating and a diffuse screen refused the mirror's 0.9 and 0.9 (R + T above 1)."""
+    if self.role not in ROLE_STARTS:  # none: the values wait for the next role
+        return
+    before = ROLE_STARTS.get(self.started_role, {})
+    for name, value in ROLE_STARTS[self.role].items():
+        prop = self.bl_rna.properties[name]
+        was = before.get(name, tuple(prop.default_array) if prop.is_array else prop.default)
+        if np.allclose(getattr(self, name), was, rtol=1e-6, atol=1e-7):  # stored as float32
+            setattr(self, name, value)
+    self.started_role = self.role
+
+
 def _object_annotations() -> dict:
     check_consistent([cls.schema for cls in MATERIALS.values()])
     ann = {
-        "role": EnumProperty(name="Optical role", items=ROLE_ITEMS, default="none",
+        "role": EnumProperty(name="Optical role", items=ROLE_ITEMS, default="none", update=_role_changed,
                              description="The tracer material of this object"),
+        "started_role": StringProperty(name="Started role", default="", options={"HIDDEN"},
+                                       description="The role whose starting values the fields were given last"),
         "smooth_normals": BoolProperty(name="Smooth normals", default=False,
                                        description="Interpolate vertex normals (curved mirrors and lenses)"),
         "emits": BoolProperty(name="Emits light", default=False,

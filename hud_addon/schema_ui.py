@@ -76,6 +76,19 @@ def _default(f: Field):
     return d
 
 
+def starting_values(fields, prefix: str = "") -> dict[str, object]:
+    """{property name: value} that a block's numbers and colours start from in a panel (the field's
+    default, else the value a user interface starts from), its groups' fields included."""
+    out: dict[str, object] = {}
+    for f in fields:
+        if f.kind == "group":
+            out |= starting_values(f.fields, f"{prefix}{f.name}_")
+        elif f.kind in ("rgb", "number") and (d := _default(f)) is not None:
+            out[prefix + f.name] = tuple(float(x) for x in d) if isinstance(d, list | tuple) else \
+                ((float(d),) * 3 if f.kind == "rgb" else float(d))
+    return out
+
+
 def prop(f: Field):
     """The Blender property of one field (kinds of tracer.core.schema)."""
     d = _default(f)

@@ -42,3 +42,53 @@ def test_every_property_has_a_tooltip():
     res, _ = in_blender(scenario_tooltips)
     assert len(res["groups"]) >= 3, res["groups"]
     assert res["missing"] == [], res["missing"]
+
+
+def scenario_role_starting_values(out):
+    """Objects given roles by hand, as a user picks them in the Object > HUD Optical Role panel."""
+    import json
+
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    made = {}
+    for name, roles, touched in (("coating", ["coating"], None), ("screen", ["lambertian_transmitter"], None),
+                                 ("back", ["coating", "mirror"], None), ("kept", ["mirror", "coating"], 0.5)):
+        bpy.ops.mesh.primitive_plane_add(size=0.1)
+        obj = bpy.context.object
+        obj.name = name
+        for k, role in enumerate(roles):
+            obj.hud.role = role
+            if k == 0 and touched is not None:
+                obj.hud.reflectance = (touched,) * 3  # the user's own value survives the next role
+        made[name] = {"reflectance": list(obj.hud.reflectance), "transmittance": list(obj.hud.transmittance)}
+    bpy.data.objects["kept"].hud.role = "none"  # R 0.5 + T 0.7: refused, as it should be; left out here
+    exported = bpy.ops.hud.export_scene(directory=str(Path(out) / "scene"))
+    scene = json.loads((Path(out) / "scene" / "scene.json").read_text())
+    disable(module)
+    return {"made": made, "exported": sorted(exported),
+            "materials": {o["name"]: o["material"] for o in scene["objects"]}}
+
+
+def test_a_role_chosen_by_hand_starts_from_values_it_accepts(tmp_path):
+    """Issue 31's second walk-through: a Coated partial reflector and a Diffuse screen chosen in the panel
+    were refused at their own starting values ("reflectance + transmittance must not exceed 1"): every
+    role shares one Reflectance and one Transmittance, which started at the mirror's 0.9. A role now
+    starts from its own values where the object holds the values of the role before it; a value the
+    user set is kept."""
+    res, _ = in_blender(scenario_role_starting_values, tmp_path)
+    made = res["made"]
+    assert made["coating"]["reflectance"] == pytest.approx([0.25] * 3) and \
+        made["coating"]["transmittance"] == pytest.approx([0.7] * 3)
+    assert made["screen"]["reflectance"] == pytest.approx([0.0] * 3) and \
+        made["screen"]["transmittance"] == pytest.approx([0.9] * 3)
+    assert made["back"]["reflectance"] == pytest.approx([0.9] * 3)  # the coating's start, so the mirror's
+    assert made["kept"]["reflectance"] == pytest.approx([0.5] * 3) and \
+        made["kept"]["transmittance"] == pytest.approx([0.7] * 3)
+    assert res["exported"] == ["FINISHED"], res
+    m = res["materials"]
+    assert m["coating"]["type"] == "coating" and m["coating"]["reflectance"] == pytest.approx([0.25] * 3)
+    assert m["screen"]["type"] == "lambertian_transmitter" and m["screen"]["transmittance"] == pytest.approx([0.9] * 3)
+    assert m["back"]["type"] == "mirror"

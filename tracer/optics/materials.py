@@ -39,10 +39,11 @@ def material(cls: type[BSDF]) -> type[BSDF]:
     return cls
 
 
-def _rgb(name: str, default=None, label: str = "", description: str = "", required: bool = True) -> Field:
-    """An RGB ratio in [0, 1] (reflectance, transmittance); user interfaces start from 0.9."""
+def _rgb(name: str, default=None, label: str = "", description: str = "", required: bool = True,
+         ui_default: float = 0.9) -> Field:
+    """An RGB ratio in [0, 1] (reflectance, transmittance); user interfaces start from ``ui_default``."""
     return Field(name, "rgb", REQUIRED if required else default, unit="1", minimum=0.0, maximum=1.0, label=label,
-                 description=description, ui_default=0.9)
+                 description=description, ui_default=ui_default)
 
 
 def _energy_check(params: dict, fail):
@@ -351,17 +352,19 @@ class Coating(BSDF):
 
     schema = Schema("coating", "Coated partial reflector",
                     "Thin coated plate: specular reflectance R, undeviated transmittance T",
-                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1", required=False),
+                    # a user interface starts from a combiner's coating, lossy and s-reflecting: R + T <= 1
+                    (_rgb("reflectance", label="Reflectance", description="Specular reflectance, 0..1", required=False,
+                          ui_default=0.25),
                      _rgb("transmittance", label="Transmittance", description="Undeviated transmittance, 0..1",
-                          required=False),
+                          required=False, ui_default=0.7),
                      _rgb("reflectance_s", label="Reflectance s", description="Reflectance for s light, 0..1",
-                          required=False),
+                          required=False, ui_default=0.35),
                      _rgb("reflectance_p", label="Reflectance p", description="Reflectance for p light, 0..1",
-                          required=False),
+                          required=False, ui_default=0.15),
                      _rgb("transmittance_s", label="Transmittance s", description="Transmittance for s light, 0..1",
-                          required=False),
+                          required=False, ui_default=0.6),
                      _rgb("transmittance_p", label="Transmittance p", description="Transmittance for p light, 0..1",
-                          required=False)),
+                          required=False, ui_default=0.8)),
                     alternatives=(("reflectance", "transmittance"),
                                   ("reflectance_s", "reflectance_p", "transmittance_s", "transmittance_p")),
                     check=_coating_check)
