@@ -143,6 +143,36 @@ def test_workers_refuse_a_scene_folder_that_changed_since_the_render_began(prese
         render_parallel(integrator, Budget(rays=10**10), workers=2)
 
 
+def test_workers_keep_their_integrator_for_the_same_scene_in_another_folder(preset, tmp_path, monkeypatch):
+    """Blender exports every F12's scene into a new folder, and the workers built the same world and
+    integrator again on each (the job's key held the folder): the second F12 was the slowest to show
+    pixels. The key is what the batches trace: the same scene elsewhere keeps the workers' integrator;
+    an edited one, or another seed, does not."""
+    import shutil
+
+    from tracer.methods import INTEGRATORS, Budget
+    from tracer.runtime import parallel
+    from tracer.scene import load_scene
+
+    monkeypatch.setattr(parallel, "_WORKER", {})
+    folder = preset("analytic-mirror")
+    copy = shutil.copytree(folder, tmp_path / "copy")
+
+    def job(where, seed=1):
+        local = INTEGRATORS["backward"](load_scene(where), seed, 4096)
+        local.prepare(Budget(rays=10**6))
+        return parallel.job_of(local)
+
+    first = job(folder)
+    built = parallel._job_integrator(first)
+    again = job(copy)
+    assert again[0] == first[0] and again[1] != first[1]
+    assert parallel._job_integrator(again) is built
+    assert job(copy, seed=2)[0] != first[0]
+    edit_json(copy, lambda d: d["eye"].update(pupil_diameter_mm=3.0))
+    assert job(copy)[0] != first[0]
+
+
 def test_external_files_are_allowed_in_the_workers_too(preset, tmp_path):
     """--allow-external-files with two workers: the workers load the folder with the same rule."""
     from tracer.cli import main

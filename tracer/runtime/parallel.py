@@ -104,6 +104,16 @@ def _exit_with_parent(sentinel: int):
     os._exit(0)
 
 
+def job_of(local) -> tuple:
+    """The job of a render by the integrator ``local`` (after its prepare), as :func:`_job_integrator` takes
+    it. Its key, by which the workers keep its integrator, is what the batches trace; the scene's folder is
+    left out (Blender exports each F12's scene into a folder of its own: the workers built the same world
+    and integrator again), the scene's hash in."""
+    job = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size, local.worker_options(),
+           dataclasses.asdict(local.eye.spec), local.scene.scene_hash, local.scene.allow_external)
+    return hashlib.sha256(pickle.dumps(job[1:])).hexdigest(), *job
+
+
 def _job_integrator(job: tuple):
     """The integrator of a render's ``job`` (a key that names it, scene folder, method, seed, batch size,
     options, eye, scene hash, external files allowed), built when a worker first traces one of its
@@ -462,11 +472,8 @@ def render_parallel(local, budget: Budget, workers: int = 2, progress=None, shou
     budget = local.prepare(budget)  # before the workers take the batch size and the options
     pool = shared_pool(workers)
     warm = pool.poll_ready() == workers
-    job = (str(Path(local.scene.root)), local.name, local.seed, local.batch_size, local.worker_options(),
-           dataclasses.asdict(local.eye.spec), local.scene.scene_hash, local.scene.allow_external)
-    job = (hashlib.sha256(pickle.dumps(job)).hexdigest(), *job)  # the workers keep one job's integrator
     try:
-        result = drive(local, budget, PoolExecutor(pool, job, local), 2 * workers, progress, should_stop,
+        result = drive(local, budget, PoolExecutor(pool, job_of(local), local), 2 * workers, progress, should_stop,
                        f"x{workers}", started=started, preview=preview)
     except BaseException:  # an error, or a second Ctrl-C (abort), at any point of the pool's life
         close_shared_pool(terminate=True)
