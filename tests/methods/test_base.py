@@ -181,6 +181,40 @@ def test_an_emitter_facing_away_is_named_where_no_light_is_found(tmp_path, metho
     assert "front side" not in warnings[-1]
 
 
+def test_the_facing_hint_names_turned_leds_of_a_hud_and_not_leds_facing_the_optics(preset):
+    """A second walk-through (issue 31): the hint compared the emitters' faces with the eye's position.
+    In a HUD the LEDs face the optics, away from the eye, so every other cause of a dark render (an
+    opaque LCD, a black mirror) blamed the LEDs, and LEDs really turned away were not named. What
+    decides now is the emitter's aim, or what each of its sides sees: hud-direct's LEDs (aimed at the
+    scatterer) and the same LEDs unaimed are not named; turned round (about their x axis), they are."""
+    from tracer.methods.base import facing_hint
+    from tracer.transport.world import World
+
+    folder = preset("hud-direct")
+    assert facing_hint(World(load_scene(folder))) == ""
+
+    def turn(d):
+        for o in d["objects"]:
+            if "emission" in o:
+                for row in o["transform"]["matrix"][:3]:
+                    row[1], row[2] = -row[1], -row[2]
+
+    def unaim(d):
+        for o in d["objects"]:
+            if "emission" in o:
+                o["emission"].pop("aim", None)
+
+    edit_json(folder, unaim)
+    assert facing_hint(World(load_scene(folder))) == ""
+    edit_json(folder, turn)
+    hint = facing_hint(World(load_scene(folder)))  # unaimed and turned: the back sees the optics
+    assert "'led_0'" in hint and "'led_9'" in hint and "two_sided" in hint
+    aimed = preset("hud-direct")
+    edit_json(aimed, turn)
+    hint = facing_hint(World(load_scene(aimed)))  # turned, aimed: the scatterer lies behind them
+    assert "'led_0'" in hint and "'led_9'" in hint
+
+
 def test_the_steady_pace_is_the_rays_over_the_time_after_the_setup(mirror):
     """report.json's steady_rays_per_second read 1.2e9 on a run of 3.3 M rays/s (issue 31): it divided the
     rays after the first merged batch by the time after it, which is short where batches finish together.

@@ -69,26 +69,84 @@ Preview = Callable[[Film], None]
 PREVIEW_SECONDS = 1.0
 
 
-def facing_hint(world) -> str:
-    """Where no light was found: the one-sided emitters whose front side (where their vertices run
-    counter-clockwise, (v1 - v0) x (v2 - v0)) faces away from the eye on every face, a likely cause
-    ("" where none does)."""
+#: Rays per side of an emitter with which :func:`facing_hint` looks at what each side sees.
+FACING_RAYS = 256
+
+
+def _faces(o) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An object's triangles (f, 3, 3) mm, their front normals (f, 3) (where the vertices run
+    counter-clockwise) and areas (f,) mm^2."""
+    t = o.triangles
+    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    return t, cross / np.maximum(area, 1e-300)[:, None], area
+
+
+def _side_sees(world, o, side: float) -> bool:
+    """Whether side ``side`` (+1 the front, -1 the back) of emitter ``o`` sees anything that could pass
+    its light on: the eye, unoccluded, in front of one of its faces (direct view), or, of
+    :data:`FACING_RAYS` rays from points on its faces (by area) cosine-distributed about that side's
+    normal (seed 0), one that hits a surface of another object whose material does not absorb
+    everything."""
+    from ..core.sampling import cosine_hemisphere, frame_from_normal, to_world, uniform_triangle
+
+    t, normal, area = _faces(o)
+    if not area.sum() > 0:
+        return False
+    normal = side * normal
+    centre = t.mean(axis=1)
+    size = max(float(np.ptp(t.reshape(-1, 3), axis=0).max()), 1.0)
     eye = np.asarray(world.eye.position, dtype=np.float64)
-    away = []
-    for o in world.scene.objects:
-        if o.emission is None or o.emission.two_sided:
-            continue
-        t = o.triangles
-        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        if np.all(np.einsum("ij,ij->i", eye - t.mean(axis=1), n) <= 0):
-            away.append(o.name)
+    to_eye = eye - centre
+    facing = np.einsum("ij,ij->i", to_eye, normal) > 0
+    if facing.any():
+        if world.accel is None:
+            return True
+        o_, d = (centre + normal * size * 1e-6)[facing].T, to_eye[facing].T
+        dist = np.linalg.norm(d, axis=0)
+        if not world.accel.occluded(o_, (d / dist).astype(np.float32), dist * (1 - 1e-9)).all():
+            return True
+    if world.accel is None:
+        return False
+    rng = make_rng(0)
+    face = rng.choice(len(t), FACING_RAYS, p=area / area.sum())
+    b = uniform_triangle(rng.random((2, FACING_RAYS)))
+    tri = t[face]
+    p = (tri[:, 0] * (1 - b[0] - b[1])[:, None] + tri[:, 1] * b[0][:, None] + tri[:, 2] * b[1][:, None]).T
+    n = normal[face].T
+    d = to_world(cosine_hemisphere(rng.random((2, FACING_RAYS))), *frame_from_normal(n))
+    f = world.accel.intersect(p + n * size * 1e-6, d.astype(np.float32)).face
+    other = (f >= 0) & (world.accel.face_slot[np.maximum(f, 0)] != o.slot)
+    return bool(np.any(other & (world.face_group[f] >= 0)))
+
+
+def _faces_away(world, o) -> bool:
+    """Whether one-sided emitter ``o`` faces the wrong way. One aimed at a target ("toward") does where
+    the target's centre lies behind every one of its faces; another where its front sees nothing that
+    could pass its light on while its back does (:func:`_side_sees`)."""
+    aim = o.emission.aim
+    if aim is not None and aim.mode == "toward":
+        target = world.eye.position if aim.target == "eye" else \
+            world.scene.object(aim.target).triangles.reshape(-1, 3).mean(axis=0)
+        t, normal, _ = _faces(o)
+        return bool(np.all(np.einsum("ij,ij->i", np.asarray(target, np.float64) - t.mean(axis=1), normal) <= 0))
+    return not _side_sees(world, o, 1.0) and _side_sees(world, o, -1.0)
+
+
+def facing_hint(world) -> str:
+    """Where no light was found: the one-sided emitters that face the wrong way (:func:`_faces_away`), a
+    likely cause ("" where none does). In a HUD the LEDs face the optics, away from the eye: what
+    decides is what the emitter is aimed at or what each of its sides sees, not where the eye is."""
+    away = [o.name for o in world.scene.objects
+            if o.emission is not None and not o.emission.two_sided and _faces_away(world, o)]
     if not away:
         return ""
     names = ", ".join(repr(n) for n in away)
-    return (f"; {names} emit{'s' if len(away) == 1 else ''} from the front side only, and every face of "
-            f"{'it' if len(away) == 1 else 'them'} faces away from the eye (the front is where the vertices run "
-            "counter-clockwise): turn it, or give its emission \"two_sided\": true, unless its light is meant "
-            "to reach the eye by mirrors")
+    one = len(away) == 1
+    return (f"; {names} emit{'s' if one else ''} from the front side only (where the vertices run "
+            f"counter-clockwise), and {'its' if one else 'their'} front faces away from "
+            f"{'its' if one else 'their'} aim or from all that could pass the light on: turn "
+            f"{'it' if one else 'them'}, or give {'its' if one else 'their'} emission \"two_sided\": true")
 
 
 @dataclass
