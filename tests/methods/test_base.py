@@ -145,6 +145,17 @@ def test_a_budget_met_by_one_replicate_ends_there_and_says_its_errors_are_unmeas
     stopped = INTEGRATORS["backward"](scene, 1).render(Budget(rays=10**9), should_stop=lambda: next(answers))
     assert stopped.partial and stopped.batches == 1 and stopped.film.mean_standard_error() == 0
     assert any(w.startswith("the error bars are not measured: the film holds 1 replicate(s)") for w in stopped.warnings)
+    # The report says what the error of the mean is taken from, and the readouts do not show "± 0" for none
+    # (a second walk-through).
+    from tracer.products.report import readouts
+
+    assert res.film.mean_standard_error_basis() == "none" and two.film.mean_standard_error_basis() == "replicates"
+    report = {"luminance": {"mean": 5.0, "mean_standard_error": 0.0, "mean_standard_error_from": "none"},
+              "adaptation_luminance": 5.0, "noise": {"median_relative_standard_error_lit_pixels": None},
+              "efficiency": 0.5, "rays": 1000, "seconds": 1.0, "rays_per_second": 1000.0, "workers": 1,
+              "partial": False}
+    mean_row = dict(readouts(report))["Mean luminance"]
+    assert "±" not in mean_row and "no error bar" in mean_row
 
 
 def test_roulette_reference_comes_from_a_pilot_that_every_process_repeats(tmp_path, preset):

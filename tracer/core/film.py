@@ -482,6 +482,24 @@ class Film:
                 var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
         return float(np.sqrt(var))
 
+    def mean_standard_error_basis(self, group: str | None = None) -> str:
+        """What :meth:`mean_standard_error` is taken from, for the report: "replicates" (the spread of
+        the whole-image replicates' means), "pixels" (the pixels' own variances, each from the samples
+        of that pixel; pixels with fewer than two are left out, so that it is a lower bound where some
+        are), or "none" (fewer than two replicates or samples: no error bar, the figure reads 0); the
+        groups' bases joined by "+" where they differ."""
+        bases = []
+        for g, rep in self.groups.items():
+            if group is not None and g != group:
+                continue
+            if rep.pixel_count is not None:
+                basis = "pixels" if int(np.max(self._live(rep.counts()), initial=0)) >= 2 else "none"
+            else:
+                basis = "replicates" if rep.count >= 2 else "none"
+            if basis not in bases:
+                bases.append(basis)
+        return "+".join(bases) or "none"
+
     def component_totals(self, name: str) -> tuple[float, float]:
         """One component's luminance, cd/m^2, and that luminance's variance, (cd/m^2)^2, each summed over
         the pixels."""

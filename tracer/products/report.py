@@ -63,13 +63,15 @@ def build_report(scene: Scene, result: RenderResult, figures: dict, shape: tuple
         "efficiency_definition": efficiency_definition,
         "luminance": {"unit": "cd/m^2", "mean": figures["mean"], "max": figures["max"],
                       "log_average": figures["log_average"],
-                      "mean_standard_error": result.film.mean_standard_error()},
+                      "mean_standard_error": result.film.mean_standard_error(),
+                      "mean_standard_error_from": result.film.mean_standard_error_basis()},
         "components": components_report(result),
         "replicates": result.film.replicates,
         "stage_seconds": result.stages,
         "adaptation_luminance": preview_info["adaptation_luminance"],
         "adaptation_mode": preview_info.get("adaptation_mode", "log_average"),
-        "noise": {"median_relative_standard_error_lit_pixels": median_err},
+        "noise": {"median_relative_standard_error_lit_pixels": median_err,
+                  "from": "each lit pixel's own samples (pixels with fewer than two left out)"},
         "preview": preview_info,
         "image": {"width": shape[1], "height": shape[0],
                   "channels": ["R", "G", "B", "Y", "Y_var"],
@@ -143,7 +145,10 @@ def readouts(report: dict) -> list[tuple[str, str]]:
         rows.append(("Ghost", f"{ghost['ratio_to_symbol']:.3g} of the symbols, {ghost['offset_mrad']:.3g} mrad "
                               f"({dx:+d}, {dy:+d} px)"))
     lum = report["luminance"]
-    rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
+    if lum.get("mean_standard_error_from", "replicates") == "none":  # 0 there means no error bar, not none
+        rows.append(("Mean luminance", f"{lum['mean']:,.4g} cd/m² (no error bar: fewer than two samples)"))
+    else:
+        rows.append(("Mean luminance", f"{lum['mean']:,.4g} ± {lum['mean_standard_error']:.2g} cd/m²"))
     mode = report.get("adaptation_mode", "log_average").replace("_", "-")
     rows.append(("Adaptation", f"{report['adaptation_luminance']:,.4g} cd/m² ({mode})"))
     for name, ch in (report.get("method_details") or {}).get("channels", {}).items():
