@@ -13,7 +13,8 @@ colour, logarithmic, with a legend in cd/m^2: tracer.products.falsecolour), writ
 as hud-trace writes its outputs): DIR and the arguments are checked
 and DIR locked before Blender starts (exit 2, one line), Blender renders into a temporary folder, and
 the two files are read back and moved into DIR together, or not at all (exit 4, the earlier set
-kept). The report's ``run_id`` names the set. This module imports nothing from the package at import
+kept); a render in which no path found light exits 3 once its set is written, as hud-trace's. The
+report's ``run_id`` names the set. This module imports nothing from the package at import
 time (main() takes the tracer's allocator settings) and runs as a top-level script.
 
 With a real Blender and the extension installed:
@@ -220,7 +221,7 @@ def _render(args, blend: Path, outputs) -> int:
     print(f"{figures['method']}: {figures['rays']:,} rays in {figures['seconds']:.1f} s, efficiency "
           f"{figures['efficiency']:.3g}, luminance mean {figures['luminance']['mean']:.4g} cd/m^2 -> "
           f"{outputs.folder}", file=sys.stderr)
-    return 0
+    return 3 if figures.get("paths_found_light") == 0 else 0  # as hud-trace render: written, no light found
 
 
 if __name__ == "__main__":

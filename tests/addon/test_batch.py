@@ -148,7 +148,7 @@ def test_hud_render_of_a_file_blender_cannot_render_exits_2_in_one_line(tmp_path
 def test_hud_render_says_each_warning_and_error_once(tmp_path):
     """Issue 31's walk-through: hud-render printed every warning and error twice, Blender's echo of the
     engine's report on standard output ("Warning: HUD Tracer: ...") and its own line on standard error.
-    A .blend with a camera and no light: the dark-scene warning once, Blender's other lines kept."""
+    A .blend with a camera and no light: the dark-scene warning once, Blender's other lines kept, exit 3."""
     blend = tmp_path / "dark.blend"
     made = subprocess.run([sys.executable, "-c", "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); "
                            "bpy.ops.object.camera_add(location=(0, 0, 1)); "
@@ -159,7 +159,9 @@ def test_hud_render_says_each_warning_and_error_once(tmp_path):
     assert made.returncode == 0 and blend.is_file(), made.stderr[-2000:]
     proc = subprocess.run([sys.executable, "-m", "hud_addon.batch", str(blend), "--out", str(tmp_path / "out"),
                            "--rays", "100000"], capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    # written, and exit 3 as hud-trace render for a render that found no light (it exited 0: a batch took
+    # the black image for a result)
+    assert proc.returncode == 3 and (tmp_path / "out" / "report.json").is_file(), proc.stderr[-3000:]
     both = proc.stdout + proc.stderr
     assert both.count("the scene has no light source") == 1, both
     assert "warning: the scene has no light source" in proc.stderr and "HUD Tracer:" not in proc.stdout
