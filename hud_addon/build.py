@@ -128,8 +128,7 @@ def clear_previous(scene) -> list[str]:
         _remove_collection(coll)
     for obj in [o for o in scene.objects if _is_factory_cube(o) or _is_factory_camera_or_light(o)]:
         data, kind = obj.data, obj.type
-        if kind != "MESH":
-            removed.append(f"the startup {kind.lower()}")
+        removed.append(f"the startup {'cube' if kind == 'MESH' else kind.lower()}")
         bpy.data.objects.remove(obj)
         if data.users == 0:
             {"MESH": bpy.data.meshes, "CAMERA": bpy.data.cameras, "LIGHT": bpy.data.lights}[kind].remove(data)

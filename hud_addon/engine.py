@@ -34,6 +34,7 @@ from ..tracer.core.errors import SceneError, StoppedBeforeFirstBatch, TracerErro
 from ..tracer.core.units import Y_WEIGHTS
 from ..tracer.core.validate import WorkersError, check_workers
 from ..tracer.methods import INTEGRATORS, Budget
+from ..tracer.methods.base import NO_LIGHT_SOURCE
 from ..tracer.products.falsecolour import false_colour
 from ..tracer.products.outputs import png_file, write_as_set
 from ..tracer.products.render import add_analysis, render_products, run_render
@@ -42,7 +43,7 @@ from ..tracer.runtime.distributed import SchedulerError, connect
 from ..tracer.scene import load_scene
 from ..tracer.transport.world import World
 from .export import export_scene
-from .messages import blender_terms, generated_image_warnings
+from .messages import blender_terms, dark_scene_hint, generated_image_warnings
 
 #: Extra passes written beside Combined: name -> (channels, channel ids, Blender pass type).
 PASSES = {"Y": (1, "X", "VALUE"), "Y_noise": (1, "X", "VALUE")}
@@ -266,6 +267,9 @@ def render_final(engine, depsgraph) -> dict:
             full.stamp_data_add_field(key, str(value))
     products.report["blender"] = {"frame": scene.frame_current, "wall_seconds": time.perf_counter() - t0}
     report = dict(products.report)
+    hint = dark_scene_hint(scene) if any(w.startswith(NO_LIGHT_SOURCE) for w in report["warnings"]) else ""
+    if hint:  # the dark scene's warning, with what Blender shows that the tracer does not take
+        report["warnings"] = [f"{w}; {hint}" if w.startswith(NO_LIGHT_SOURCE) else w for w in report["warnings"]]
     for w in report["warnings"]:
         engine.report({"WARNING"}, f"HUD Tracer: {w}")
     LAST_RENDER.clear()

@@ -146,3 +146,23 @@ def generated_image_warnings(scene) -> list[str]:
     return [f"{what} image {img.name!r} is generated and not packed: its pixels are lost when the .blend is saved "
             "and opened again; pack it (Image > Pack) or save it to a file"
             for what, img in images if img.source == "GENERATED" and img.packed_file is None and img.is_dirty]
+
+
+def dark_scene_hint(scene) -> str:
+    """For a render with no light source, in Blender's terms: the lights Blender shows that the tracer
+    does not take (all but Sun lights) and the meshes left out for want of an optical role ("" where
+    there are none)."""
+    lights = [o for o in scene.objects if o.type == "LIGHT" and o.data.type != "SUN" and not o.hide_render]
+    plain = [o.name for o in scene.objects if o.type == "MESH" and o.hud.role == "none" and not o.hide_render]
+    parts = []
+    if lights:
+        names = ", ".join(f"{o.data.type.title()} light {o.name!r}" for o in lights[:3])
+        parts.append(f"{names}{' and more' if len(lights) > 3 else ''} {'is' if len(lights) == 1 else 'are'} not "
+                     "exported: the tracer's light sources are meshes that emit (Render Properties > HUD Tracer > "
+                     "Add Lamp, or Object > HUD Optical Role > Emits light), Sun lights and the World")
+    if plain:
+        names = ", ".join(repr(n) for n in plain[:3]) + (f" and {len(plain) - 3} more" if len(plain) > 3 else "")
+        one = len(plain) == 1
+        parts.append(f"{names} {'has' if one else 'have'} no optical role (Object > HUD Optical Role) and "
+                     f"{'is' if one else 'are'} left out")
+    return "; ".join(parts)

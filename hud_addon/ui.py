@@ -263,8 +263,9 @@ class HUD_PT_sun(_HudPanel, bpy.types.Panel):
         col = self.layout.column()
         if light.type != "SUN":
             col.label(text="HUD Tracer exports Sun lights only, as the environment's sun;", icon="INFO")
-            col.label(text="a lamp is a mesh that emits: Add Lamp, or Object > HUD Optical Role > Emits light",
+            col.label(text="a lamp is a mesh that emits: Render Properties > HUD Tracer > Add Lamp, or give a mesh",
                       icon="BLANK1")
+            col.label(text="an Optical Role (Object > HUD Optical Role) and tick its Emits light", icon="BLANK1")
             return
         col.prop(light.hud, "illuminance_lux", text="Illuminance (lx)")
         col.prop(light, "angle", text="Angular diameter")

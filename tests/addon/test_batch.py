@@ -154,6 +154,7 @@ def test_hud_render_says_each_warning_and_error_once(tmp_path):
                            "bpy.ops.object.camera_add(location=(0, 0, 1)); "
                            "bpy.context.scene.camera = bpy.context.object; "
                            "bpy.ops.mesh.primitive_plane_add(size=1, location=(0, 0, -1)); "
+                           "bpy.ops.object.light_add(type='POINT', location=(0, 0, 2)); "
                            f"bpy.ops.wm.save_as_mainfile(filepath={str(blend)!r})"], capture_output=True, text=True,
                           timeout=300, cwd=tmp_path)
     assert made.returncode == 0 and blend.is_file(), made.stderr[-2000:]
@@ -165,6 +166,8 @@ def test_hud_render_says_each_warning_and_error_once(tmp_path):
     both = proc.stdout + proc.stderr
     assert both.count("the scene has no light source") == 1, both
     assert "warning: the scene has no light source" in proc.stderr and "HUD Tracer:" not in proc.stdout
+    # in Blender's terms (a second walk-through): the point light the user sees, and the plane left out
+    assert "Point light 'Point' is not exported" in proc.stderr and "'Plane' has no optical role" in proc.stderr
     assert "Saved:" in proc.stdout  # Blender's own lines go on
 
 

@@ -60,3 +60,24 @@ def test_add_hud_preset_builds_in_millimetres_and_replaces_the_previous_one():
     assert res["shown_mm"] == {"pupil": pytest.approx(4.0), "stored": pytest.approx(4.0)}
     assert [c for c in res["collections"] if c.startswith("HUD")] == ["HUD analytic-mirror", "HUD hud-direct"]
     assert res["shown_m"] == pytest.approx(0.004) and res["stored_after"] == pytest.approx(3.0)
+
+
+def scenario_clear_startup():
+    """Blender's startup scene, its cube, camera and light cleared as Add HUD Preset clears them."""
+    import sys
+
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    removed = sys.modules[f"{module}.hud_addon.build"].clear_previous(bpy.context.scene)
+    disable(module)
+    return removed
+
+
+def test_add_hud_preset_says_it_removed_the_startup_cube_too():
+    """A second walk-through: Add HUD Preset removed the startup cube but its message named only the
+    startup light and camera."""
+    removed, _ = in_blender(scenario_clear_startup)
+    assert sorted(removed) == ["the startup camera", "the startup cube", "the startup light"], removed

@@ -69,6 +69,9 @@ Preview = Callable[[Film], None]
 PREVIEW_SECONDS = 1.0
 
 
+#: How a render's warning about a scene without any light source begins (the add-on adds Blender's terms).
+NO_LIGHT_SOURCE = "the scene has no light source"
+
 #: Rays per side of an emitter with which :func:`facing_hint` looks at what each side sees.
 FACING_RAYS = 256
 
@@ -401,7 +404,7 @@ class Integrator:
                                     "pilot_rays": self.pilot_rays}
         if result.found == 0 and len(self.world.lights) == 0 and self.world.environment.is_black:
             result.warnings.append(
-                "the scene has no light source (no object with an emission block of positive luminance, no lit "
+                f"{NO_LIGHT_SOURCE} (no object with an emission block of positive luminance, no lit "
                 "environment): the image is black because the scene is dark")
         elif result.found == 0:
             result.warnings.append(
