@@ -624,6 +624,12 @@ def cmd_sweep(args) -> int:
     except SweepArgumentError as e:
         print(f"error: {e.argument}: {e.message}", file=sys.stderr)
         return EXIT_INPUT
+    except KeyboardInterrupt as e:
+        if flag.stop:  # a second stop signal, once the sweep's own handler had taken the first
+            return _write_errors(e, args.out)
+        print("interrupted before the work began (the grid's scenes were being checked): nothing written",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
         return _write_errors(e, args.out)
     finally:
@@ -814,12 +820,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _import_holding_interrupts() -> bool:
-    """Import the modules the commands need with Ctrl-C held back; returns whether one came. A compiled
-    module (numpy's, OpenImageIO's) turns an interrupt during its initialisation into an ImportError
-    with a misleading message, so an interrupt must not land there."""
+    """Import the modules the commands need with the stop signals held back; returns whether one came. A
+    compiled module (numpy's, OpenImageIO's) turns an interrupt during its initialisation into an
+    ImportError with a misleading message, so an interrupt must not land there."""
     came = []
     try:
-        previous = signal.signal(signal.SIGINT, lambda *_: came.append(True))
+        previous = {s: signal.signal(s, lambda *_: came.append(True)) for s in STOP_SIGNALS}
     except ValueError:  # not the main thread (main called by a host program): nothing to hold back
         return False
     try:
@@ -828,12 +834,30 @@ def _import_holding_interrupts() -> bool:
         from .products import falsecolour, render  # noqa: F401
         from .scans import eyebox, sweep  # noqa: F401
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     return bool(came)
+
+
+def _interrupt(signum, frame):
+    """SIGTERM and SIGHUP before a command has its own handlers: as Ctrl-C, "interrupted before the work
+    began" (exit 130, the output folder released) instead of the default death (exit 143, no word, a
+    folder made for the outputs left behind)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _stop_signals_interrupt() -> dict:
+    """Make SIGTERM and SIGHUP interrupt as Ctrl-C does (:func:`_interrupt`) until a command installs its
+    own handlers; returns the handlers to put back ({} outside the main thread)."""
+    try:
+        return {s: signal.signal(s, _interrupt) for s in STOP_SIGNALS if s != signal.SIGINT}
+    except ValueError:  # not the main thread (main called by a host program)
+        return {}
 
 
 def main(argv: list[str] | None = None) -> int:
     started = _command_start()
+    previous = _stop_signals_interrupt()
     try:
         if _import_holding_interrupts():
             raise KeyboardInterrupt
@@ -847,6 +871,8 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted before the work began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:  # the worker pool the command's renders shared ends with the command, not at the interpreter's exit
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         parallel = sys.modules.get(f"{__package__}.runtime.parallel")
         if parallel is not None:
             parallel.close_shared_pool()

@@ -238,3 +238,28 @@ def test_a_stopped_render_keeps_its_hud_figures_marked_partial(preset, tmp_path)
     assert report["analysis"] == "hud figures only (stopped render)"
     code, err = run_cli("readouts", tmp_path / "o")
     assert code == 0
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["INT", "TERM"])
+def test_a_stop_signal_while_a_sweep_checks_its_grid_ends_it_with_nothing_written(mirror, tmp_path, monkeypatch,
+                                                                                  sig):
+    """A second walk-through: a stop signal while a sweep loaded its grid's scenes, before its own handler,
+    gave exit 5 ("aborted", a second Ctrl-C's status) for Ctrl-C, and for SIGTERM the default death (143,
+    no word, the folder made for the outputs left behind). Both now say the work had not begun: 130,
+    nothing written, no folder left."""
+    from tracer.scans import plan
+
+    real = plan.plan_sweep
+
+    def signalled(*args, **kwargs):
+        os.kill(os.getpid(), sig)  # the handler runs at the next bytecode: before the grid is planned
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(plan, "plan_sweep", signalled)
+    before = signal.getsignal(signal.SIGTERM)
+    out = tmp_path / "o"
+    code, err = run_cli("sweep", mirror, "--set", "eye.pupil_diameter_mm=3:4:2", "--rays", 100_000, "--quiet",
+                        "--out", out)
+    assert code == 130 and "interrupted before the work began" in err and "Traceback" not in err, err
+    assert not out.exists()
+    assert signal.getsignal(signal.SIGTERM) == before  # main() puts back the handler it found
