@@ -21,7 +21,7 @@ add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one l
 ``eyebox`` writes eyebox.csv, eyebox.png and eyebox.json (tracer.scans.eyebox) into a folder as one set: 0
 written; 2 bad input, before the scan (nothing written); 3 written, but the analysis cannot predict
 the scene (eyebox.json's ``valid`` is false and stderr says why); 4 the outputs could not be written
-(the folder keeps its earlier ones); 5 aborted by Ctrl-C (nothing written).
+(the folder keeps its earlier ones); 130 stopped by Ctrl-C, SIGTERM or SIGHUP (nothing written).
 
 ``sweep`` renders a scene over a grid of scene.json values (tracer.scans.sweep) into a folder: runs/<k>/ and
 sweep.csv, sweep.json and sweep.png, as one set: 0 written; 2 bad input, before any ray (nothing
@@ -714,8 +714,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--scheduler", metavar="ADDRESS", default=None, help=SCHEDULER_HELP)
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--no-analysis", action="store_true",
-                   help="leave the brightness-theorem comparison and the optical analysis out of report.json (they "
-                        "follow the render and take about 0.7 and 0.8 s on hud-direct)")
+                   help="leave the HUD figures, the brightness-theorem comparison and the optical analysis out of "
+                        "report.json (they follow the image into report.json and take a few seconds)")
     r.add_argument("--allow-external-files", action="store_true",
                    help="let the scene name meshes and images outside its folder (absolute paths, \"..\", links "
                         "out of it); the folder is then no longer self-contained")
