@@ -91,3 +91,14 @@ def test_the_command_line_renders_on_a_scheduler_the_same_image_and_set(preset, 
                         "tcp://127.0.0.1:9")
     assert_one_line_error(code, err, "--scheduler", "tcp://127.0.0.1:9", "no Dask scheduler answers")
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.parametrize("address", ["foo", "tcp://foo", "tcp://127.0.0.1:99999", "host:port"])
+def test_what_is_not_a_scheduler_address_is_named_so(address):
+    """A second walk-through: `--scheduler foo` said "no Dask scheduler answers there within 10 s" at once
+    (Dask's ValueError: the port was missing). Now: not an address, and what one looks like."""
+    pytest.importorskip("distributed")
+    from tracer.runtime.distributed import SchedulerError, connect
+
+    with pytest.raises(SchedulerError, match="not a scheduler's address; give HOST:PORT or tcp://HOST:PORT"):
+        connect(address)

@@ -18,6 +18,7 @@ import dataclasses
 import hashlib
 import io
 import pickle
+import re
 import shutil
 import tempfile
 import time
@@ -128,12 +129,21 @@ class SchedulerError(TracerError):
     """The Dask scheduler named cannot be used: Dask is not installed, or the address does not answer."""
 
 
+#: A scheduler's address: an optional protocol, a host (a name, an IPv4 or a bracketed IPv6 address) and a port.
+ADDRESS = re.compile(r"(?:(?:tcp|tls|ws|wss|ucx)://)?(?:[^\s:/\[\]]+|\[[0-9A-Fa-f:.]+\]):(\d{1,5})")
+
+
 def connect(address: str):
     """A client of the Dask scheduler at ``address`` ("tcp://host:8786"), kept for the session's next
-    renders; :class:`SchedulerError` (naming the address) when Dask is missing or the scheduler does not
-    answer within :data:`CONNECT_TIMEOUT_S`, and when it has no worker."""
+    renders; :class:`SchedulerError` (naming the address) when it is not an address (:data:`ADDRESS`,
+    a port up to 65535: Dask had said no scheduler answered there), when Dask is missing or the
+    scheduler does not answer within :data:`CONNECT_TIMEOUT_S`, and when it has no worker."""
     if address in _CLIENTS:
         return _CLIENTS[address]
+    m = ADDRESS.fullmatch(address)
+    if m is None or not 0 < int(m.group(1)) < 65536:
+        raise SchedulerError(f"{address}: not a scheduler's address; give HOST:PORT or tcp://HOST:PORT (a scheduler "
+                             "started with `dask scheduler` listens on port 8786: tcp://HOST:8786)")
     try:
         from distributed import Client
     except ImportError:
