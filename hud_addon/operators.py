@@ -89,20 +89,20 @@ class HUD_OT_add_windshield(bpy.types.Operator):
     bl_label = "Add Windshield"
     bl_options = {"REGISTER", "UNDO"}
 
-    size_mm: FloatVectorProperty(name="Size", size=2, default=(1400.0, 800.0), min=1.0, max=5000.0,
+    size_mm: FloatVectorProperty(name="Size (mm)", size=2, default=(1400.0, 800.0), min=1.0, max=5000.0,
                                  description="Width (x) and height (y) of the inner surface's outline, mm")
-    thickness_mm: FloatProperty(name="Thickness", default=4.76, min=0.01, max=100.0,
+    thickness_mm: FloatProperty(name="Thickness (mm)", default=4.76, min=0.01, max=100.0,
                                 description="Thickness of the glass at the object's origin, mm")
-    wedge_mrad: FloatProperty(name="Wedge", default=0.0, min=-50.0, max=50.0,
+    wedge_mrad: FloatProperty(name="Wedge (mrad)", default=0.0, min=-50.0, max=50.0,
                               description="Angle between the outer and the inner surface, mrad (a few tenths fuse "
                                           "a HUD's ghost)")
-    wedge_direction_deg: FloatProperty(name="Wedge direction", default=90.0, min=-360.0, max=360.0,
+    wedge_direction_deg: FloatProperty(name="Wedge direction (deg)", default=90.0, min=-360.0, max=360.0,
                                        description="Direction the glass thickens in, degrees from +X toward +Y "
                                                    "(90: toward the top)")
-    radius_x_mm: FloatProperty(name="Radius across", default=0.0, min=-1e7, max=1e7,
+    radius_x_mm: FloatProperty(name="Radius across (mm)", default=0.0, min=-1e7, max=1e7,
                                description="Inner radius in the X-Z section, mm, positive concave toward +Z "
                                            "(the driver); 0 flat")
-    radius_y_mm: FloatProperty(name="Radius up", default=0.0, min=-1e7, max=1e7,
+    radius_y_mm: FloatProperty(name="Radius up (mm)", default=0.0, min=-1e7, max=1e7,
                                description="Inner radius in the Y-Z section, mm; 0 flat")
     ior: FloatProperty(name="IOR", default=1.52, min=1.0, max=4.0, description="The glass's refractive index")
 
@@ -143,9 +143,9 @@ class HUD_OT_add_lamp(bpy.types.Operator):
     bl_label = "Add Lamp"
     bl_options = {"REGISTER", "UNDO"}
 
-    size_mm: FloatVectorProperty(name="Size", size=2, default=(100.0, 100.0), min=0.001, max=1e6,
+    size_mm: FloatVectorProperty(name="Size (mm)", size=2, default=(100.0, 100.0), min=0.001, max=1e6,
                                  description="Width (x) and height (y) of the emitting rectangle, mm")
-    luminance: FloatProperty(name="Luminance", default=1000.0, min=0.0, max=MAX_LUMINANCE,
+    luminance: FloatProperty(name="Luminance (cd/m²)", default=1000.0, min=0.0, max=MAX_LUMINANCE,
                              description="Luminance of its face, cd/m^2 (an LED backlight: 1e5 to 1e7)")
     two_sided: BoolProperty(name="Two-sided", default=False, description="Emit from both faces")
 
@@ -165,6 +165,8 @@ class HUD_OT_add_lamp(bpy.types.Operator):
             o.select_set(False)
         obj.select_set(True)
         context.view_layer.objects.active = obj
+        self.report({"INFO"}, f"{obj.name}: {self.size_mm[0]:g} x {self.size_mm[1]:g} mm at {self.luminance:g} cd/m², "
+                              f"emitting toward its {'+Z and -Z' if self.two_sided else '+Z'}")
         return {"FINISHED"}
 
 
@@ -208,6 +210,10 @@ class HUD_OT_export_scene(bpy.types.Operator):
         return {"FINISHED"}
 
 
+#: The name of the mesh Show Light Paths makes, and the custom property that marks its object.
+LIGHT_PATHS, LIGHT_PATHS_TAG = "HUD light paths", "hud_light_paths"
+
+
 class HUD_OT_show_light_paths(bpy.types.Operator):
     """Add a mesh of sampled light paths from the emitters to the eye (forward tracing)"""
 
@@ -241,10 +247,18 @@ class HUD_OT_show_light_paths(bpy.types.Operator):
         verts = np.concatenate(paths) / unit_mm(scene)
         offsets = np.cumsum([0] + [len(p) for p in paths])
         edges = [(i, i + 1) for a, b in zip(offsets[:-1], offsets[1:], strict=True) for i in range(a, b - 1)]
-        mesh = bpy.data.meshes.new("HUD light paths")
+        mesh = bpy.data.meshes.new(LIGHT_PATHS)
         mesh.from_pydata(verts.tolist(), edges, [])
-        obj = bpy.data.objects.new("HUD light paths", mesh)
-        scene.collection.objects.link(obj)
+        obj = next((o for o in scene.objects if o.get(LIGHT_PATHS_TAG)), None)
+        if obj is None or obj.type != "MESH":  # pressed again: the earlier paths are replaced, not kept beside
+            obj = bpy.data.objects.new(LIGHT_PATHS, mesh)
+            obj[LIGHT_PATHS_TAG] = True
+            scene.collection.objects.link(obj)
+        else:
+            old, obj.data = obj.data, mesh
+            if old.users == 0:
+                bpy.data.meshes.remove(old)
+                mesh.name = LIGHT_PATHS  # it had come as "HUD light paths.001" beside the old one
         self.report({"INFO"}, f"{len(paths)} light paths that reach the eye")
         return {"FINISHED"}
 

@@ -32,6 +32,10 @@ def scenario_light_paths():
     obj = bpy.data.objects["HUD light paths"]
     verts = [tuple(v.co) for v in obj.data.vertices]
     edges = len(obj.data.edges)
+    bpy.ops.hud.show_light_paths(particles=20000, max_paths=20)  # again: replaced, not kept beside
+    again = sorted(o.name for o in bpy.data.objects if o.name.startswith("HUD light paths"))
+    again_edges = len(bpy.data.objects["HUD light paths"].data.edges)
+    meshes = sorted(m.name for m in bpy.data.meshes if m.name.startswith("HUD light paths"))
     eye = tuple(bpy.context.scene.camera.location)
     mm = 1000.0 * bpy.context.scene.unit_settings.scale_length
     errors = {}
@@ -50,7 +54,8 @@ def scenario_light_paths():
     except RuntimeError as e:
         errors["open glass"] = str(e)
     disable(module)
-    return {"vertices": verts, "edges": edges, "eye": eye, "mm_per_unit": mm, "errors": errors}
+    return {"vertices": verts, "edges": edges, "eye": eye, "mm_per_unit": mm, "errors": errors, "again": again,
+            "again_edges": again_edges, "meshes": meshes}
 
 
 def test_show_light_paths_draws_paths_that_end_at_the_eye():
@@ -67,6 +72,9 @@ def test_show_light_paths_draws_paths_that_end_at_the_eye():
     for message in errors.values():
         assert "Show Light Paths: " in message and "Traceback" not in message and "scene.json" not in message
     assert "Traceback" not in proc.stdout + proc.stderr
+    # Pressed again it replaces its paths (a second walk-through: "HUD light paths.001" was added beside)
+    assert res["again"] == ["HUD light paths"] and res["meshes"] == ["HUD light paths"], res["again"]
+    assert 0 < res["again_edges"] < res["edges"]
 
 
 def scenario_readouts(out):
