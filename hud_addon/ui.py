@@ -2,6 +2,7 @@
 
 import json
 import math
+import textwrap
 
 import bpy
 
@@ -94,7 +95,7 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
             if report.get("analysis") == "pending":
                 col.label(text="The HUD figures follow the image (analysis running)", icon="TIME")
             for w in report["warnings"]:
-                col.label(text=w[:120], icon="ERROR")
+                _wrapped(col, w, "ERROR")
             col.operator("hud.show_false_colour", icon="IMAGE")
         box = col.box()
         box.label(text="Eyebox")
@@ -112,7 +113,7 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
             f = summary["figures"]
             if f is None:
                 for reason in summary["reasons"]:
-                    box.label(text=f"not valid: {reason}"[:120], icon="ERROR")
+                    _wrapped(box, f"not valid: {reason}", "ERROR")
                 return
             box.label(text=f"Eyebox {f['width_mm']:.1f} x {f['height_mm']:.1f} mm"
                            + (" (reaches the scan's edge: widen it)" if f["reaches_scan_edge"] else ""))
@@ -122,6 +123,18 @@ class HUD_PT_readouts(_HudPanel, bpy.types.Panel):
             box.label(text=f"Uniformity {f['uniformity']['design_eye']:.2f} at the design eye, "
                            f"{f['uniformity']['eyebox']:.2f} over the eyebox")
             box.label(text=f"Written to {sweep['folder']} (chart: image eyebox.png)")
+
+
+#: Characters per line of the panels' longer texts (warnings, reasons), wrapped rather than cut: a cut line
+#: lost its advice ("... so their Y_var reads 0 and the").
+WRAP = 90
+
+
+def _wrapped(layout, text: str, icon: str):
+    """``text`` as labels of at most :data:`WRAP` characters, the first with ``icon``, the others indented
+    as far."""
+    for k, line in enumerate(textwrap.wrap(text, WRAP) or [""]):
+        layout.label(text=line, icon=icon if k == 0 else ("BLANK1" if icon != "NONE" else "NONE"))
 
 
 def _surface_kinds(text: str) -> str:
@@ -149,7 +162,7 @@ class HUD_PT_optics(_HudPanel, bpy.types.Panel):
                      "optics_folder"):
             col.prop(s, name)
         if s.optics_target:
-            col.label(text=f"Target: {s.optics_target}"[:120])
+            _wrapped(col, f"Target: {s.optics_target}", "NONE")
         col.operator("hud.optical_analysis", icon="MOD_UVPROJECT")
         result = operators.OPTICS.get(scene.name)
         if result is None:
