@@ -33,6 +33,7 @@ def test_auto_picks_on_its_pilots_the_method_a_longer_run_confirms(preset, name,
     folder = preset(name, resolution=LOW)
     auto = INTEGRATORS["auto"](load_scene(folder), 2).render(Budget(rays=6_000_000))
     scene = auto.extra["channels"]["scene"]
+    assert scene["sources"] == ["emitters"]  # these scenes' environments are black: not a source
     chosen = scene["method"]
     ran = [p for p in scene["pilots"] if p["skipped"] is None]
     longest = max(p["rays"] for p in ran)

@@ -363,7 +363,10 @@ class _Channels(Integrator):
         for c in self.channels:
             entry = {"method": c.chosen if c.skipped is None else None, "asked": c.asked,
                      "chosen_by": c.chosen_by or None, "skipped": c.skipped, "note": c.note,
-                     "sources": [s for s, on in (("emitters", c.lights), ("environment", c.environment)) if on],
+                     # what the channel's world holds: auto's one channel keeps both, of a scene that may lack one
+                     "sources": [s for s, on in (("emitters", c.lights and len(c.world.lights) > 0),
+                                                 ("environment", c.environment and not c.world.environment.is_black))
+                                 if on],
                      "pilots": [p.summary() for p in c.pilots]}
             if c.integrator is not None:
                 # the channel's luminance summed over the film's layout (cd/m^2): the image's sum without

@@ -401,8 +401,10 @@ def render_scene(scene: Scene, method: str, budget: Budget, seed: int, out_dir: 
         pending = False  # stopped as the image was written: report.json keeps "analysis": "pending"
     if pending:  # after the image is written: its figures follow in report.json, rewritten whole
         if progress is not None:
-            progress(1.0, f"image written to {out_dir}; the analysis follows (report.json: HUD figures, brightness "
-                   "theorem, optics)")
+            progress(1.0, f"image written to {out_dir}; " + (
+                "its HUD figures follow into report.json (a stopped render: marked partial, no brightness theorem or "
+                "optics)" if result.partial else
+                "the analysis follows (report.json: HUD figures, brightness theorem, optics)"))
         add_analysis(products, integrator.world, integrator, result)
         f = report_file(products.report)
         write_as_set(Path(out_dir) / f.name, f.write, f.check)
