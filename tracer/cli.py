@@ -16,7 +16,8 @@ Exit status of ``render`` (each states what is on disk afterwards):
 add-on's HUD Readouts panel shows): 0, or 2 when the file is not a report (one line).
 
 ``false-colour`` writes the false-colour view of an image.exr (tracer.products.falsecolour) to one PNG file:
-0 written, 2 bad input (nothing written), 4 the file could not be written (it keeps what it held).
+0 written, 2 bad input (nothing written), 3 written, but no pixel is lit, 4 the file could not be written
+(it keeps what it held).
 
 ``eyebox`` writes eyebox.csv, eyebox.png and eyebox.json (tracer.scans.eyebox) into a folder as one set: 0
 written; 2 bad input, before the scan (nothing written); 3 written, but the analysis cannot predict
@@ -434,6 +435,10 @@ def cmd_false_colour(args) -> int:
     clamped = "".join(f"; {100 * info[k]:.3g} % of the pixels {k} the range" for k in ("below", "above") if info[k])
     print(f"false colour: {info['lo']:g} to {info['hi']:g} cd/m^2 ({info['decades']:g} decades, {info['colour_map']})"
           f"{clamped} -> {args.out}", file=sys.stderr)
+    if not (y > 0).any():  # a silent black picture would read as a dark scene shown
+        print("warning: no pixel of the image is lit (every Y is 0 cd/m^2): the view is the no-light colour "
+              "throughout, and its range is a placeholder", file=sys.stderr)
+        return EXIT_NO_LIGHT
     return 0
 
 

@@ -237,3 +237,15 @@ def test_command_line_on_a_render_and_its_refusals(tmp_path):
         lines = res.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], (case, res.stderr)
     assert sorted(p.name for p in tmp_path.iterdir()) == before and not any((tmp_path / "dir.png").iterdir())
+
+
+def test_the_view_of_an_image_with_no_lit_pixel_says_so(tmp_path):
+    """A second walk-through: an all-black EXR gave exit 0 and "1 to 10 cd/m^2 (1 decades)", a black
+    picture with nothing said. It is written, and exit 3 with a warning says no pixel is lit."""
+    from tests.support.cli import run_cli
+    from tracer import cli
+
+    write_exr(tmp_path / "black.exr", {"Y": np.zeros((8, 12))})
+    code, err = run_cli("false-colour", tmp_path / "black.exr", "--out", tmp_path / "view.png")
+    assert code == cli.EXIT_NO_LIGHT == 3 and "warning: no pixel of the image is lit" in err, err
+    assert (tmp_path / "view.png").is_file()
