@@ -167,7 +167,9 @@ class SweepResult:
         """The recommendation in one line (stderr and the chart)."""
         rec = self.recommendation()
         if not self.plan.requirements:
-            return f"{len(self.judged)} runs; no requirements given"
+            stopped = len(self.runs) - len(self.judged)
+            return (f"{len(self.judged)} runs rendered to their budget"
+                    + (f" ({stopped} stopped early)" if stopped else "") + "; no requirements given")
         if rec["none"]:
             if "closest" not in rec:
                 return "no run was rendered to its budget"
@@ -178,9 +180,9 @@ class SweepResult:
         if "intervals" in rec:
             parts = []
             for iv in rec["intervals"]:
-                lo = ("<= " if iv["low"].get("open") else "") + f"{iv['from']:.4g}"
+                lo = f"{iv['from']:.4g}" + (" or less" if iv["low"].get("open") else "")
                 hi = f"{iv['to']:.4g}" + (" or more" if iv["high"].get("open") else "")
-                parts.append(f"{lo} to {hi}" if iv["from"] != iv["to"] else f"{iv['from']:.4g}")
+                parts.append(f"from {lo} to {hi}" if iv["from"] != iv["to"] else f"{iv['from']:.4g}")
             return f"every requirement met for {rec['field']} " + " and ".join(parts)
         return f"{len(rec['runs'])} of {len(self.judged)} runs meet every requirement: runs " + \
             ", ".join(str(k) for k in rec["runs"])

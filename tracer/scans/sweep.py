@@ -147,7 +147,9 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
                 continue
             try:
                 report, rendered = render_scene(scene, method, budget, seed, staging / RUNS / str(k),
-                                                progress=_run_progress(progress, k, n), should_stop=should_stop,
+                                                progress=_run_progress(progress, k, n, staging / RUNS / str(k),
+                                                                       folder / RUNS / str(k)),
+                                                should_stop=should_stop,
                                                 batch_size=batch_size, workers=workers, scheduler=scheduler)
             except StoppedBeforeFirstBatch:  # the run has no estimate: the sweep ends with the runs before it
                 result.stopped = True
@@ -166,10 +168,13 @@ def run_sweep(plan: SweepPlan, method: str, budget, seed: int, outputs: OutputSe
     return result
 
 
-def _run_progress(progress, k: int, n: int):
+def _run_progress(progress, k: int, n: int, staged: Path, final: Path):
+    """Run ``k``'s progress as the sweep's, its messages naming the run's folder where it will be, not the
+    hidden staging folder it is written into."""
     if progress is None:
         return None
-    return lambda fraction, message: progress((k + fraction) / n, f"run {k} ({k + 1} of {n}): {message}")
+    return lambda fraction, message: progress((k + fraction) / n,
+                                              f"run {k} ({k + 1} of {n}): {message.replace(str(staged), str(final))}")
 
 
 def _commit(outputs: OutputSet, files: list[OutputFile], new_runs: Path, runs_dir: Path):
