@@ -31,23 +31,34 @@ def _mm_per_unit() -> float:
 
 
 def _twin(stored: str, size: int, to_shown, from_shown, **kw):
-    """A property whose value is ``to_shown(stored value)`` and which stores ``from_shown(value)``."""
+    """A property whose value is ``to_shown(stored value)`` and which stores ``from_shown(value)``.
+
+    Its declared default is NaN, and a NaN set on it resets the stored property to its own default:
+    Blender's Reset to Default Value sets a property's declared default, which a twin cannot know (a
+    length's depends on the scene's unit), and a default of 0 had set a pupil of 0.01 mm and an eye of
+    0.1 mm focal length."""
     if size:
         def get(self):
             return tuple(to_shown(v) for v in getattr(self, stored))
 
         def set_(self, value):
-            setattr(self, stored, tuple(from_shown(v) for v in value))
+            if any(math.isnan(v) for v in value):
+                self.property_unset(stored)
+            else:
+                setattr(self, stored, tuple(from_shown(v) for v in value))
 
-        return FloatVectorProperty(size=size, get=get, set=set_, **kw)
+        return FloatVectorProperty(size=size, get=get, set=set_, default=(math.nan,) * size, **kw)
 
     def get1(self):
         return to_shown(getattr(self, stored))
 
     def set1(self, value):
-        setattr(self, stored, from_shown(value))
+        if math.isnan(value):
+            self.property_unset(stored)
+        else:
+            setattr(self, stored, from_shown(value))
 
-    return FloatProperty(get=get1, set=set1, **kw)
+    return FloatProperty(get=get1, set=set1, default=math.nan, **kw)
 
 
 def length_twin(stored: str, name: str, description: str, size: int = 0, nonnegative: bool = False):

@@ -92,3 +92,38 @@ def test_a_role_chosen_by_hand_starts_from_values_it_accepts(tmp_path):
     assert m["coating"]["type"] == "coating" and m["coating"]["reflectance"] == pytest.approx([0.25] * 3)
     assert m["screen"]["type"] == "lambertian_transmitter" and m["screen"]["transmittance"] == pytest.approx([0.9] * 3)
     assert m["back"]["type"] == "mirror"
+
+
+def scenario_reset_twins():
+    """The twins a panel shows in the scene's units, each set away from its default, then set to its
+    declared default as Blender's Reset to Default Value does."""
+    import bpy
+
+    from tests.support.blender import disable, enable_from_source
+
+    module = enable_from_source(bpy, Path(tempfile.mkdtemp()))
+    cam, s = bpy.context.scene.camera.data.hud, bpy.context.scene.hud
+    out = {}
+    for owner, twin, stored, value in ((cam, "pupil_diameter_mm_shown", "pupil_diameter_mm", 0.003),
+                                       (cam, "focal_length_mm_shown", "focal_length_mm", 0.02),
+                                       (s, "eyebox_field_deg_shown", "eyebox_field_deg", (0.2, 0.1))):
+        setattr(owner, twin, value)
+        moved = getattr(owner, stored)
+        prop = owner.bl_rna.properties[twin]
+        setattr(owner, twin, tuple(prop.default_array) if prop.is_array else prop.default)
+        out[stored] = {"moved": list(moved) if prop.is_array else moved,
+                       "reset": list(getattr(owner, stored)) if prop.is_array else getattr(owner, stored)}
+    disable(module)
+    return out
+
+
+def test_reset_to_default_of_a_field_in_the_scenes_units_gives_its_default():
+    """A second walk-through: the fields shown in the scene's units declared no default, so Reset to
+    Default Value set them to 0: a pupil of 0.01 mm (its minimum), a focal length of 0.1 mm, with no
+    warning. Resetting one now gives the stored property's own default."""
+    res, _ = in_blender(scenario_reset_twins)
+    assert res["pupil_diameter_mm"]["moved"] == pytest.approx(3.0) and \
+        res["pupil_diameter_mm"]["reset"] == pytest.approx(4.0)
+    assert res["focal_length_mm"]["moved"] == pytest.approx(20.0) and \
+        res["focal_length_mm"]["reset"] == pytest.approx(16.67)
+    assert res["eyebox_field_deg"]["reset"] == pytest.approx([6.0, 2.0])
