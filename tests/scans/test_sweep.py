@@ -325,6 +325,13 @@ def no_render(monkeypatch):
      "--require lumnance.mean >= 1: 'lumnance' is not a section of a run's report.json (did you mean 'luminance'?"),
     ("y of no section", ("--set", f"{PANEL}=1:2:2", "--y", "contrast_ratio"),
      "--y contrast_ratio: 'contrast_ratio' is not a section of a run's report.json (the sections are: run_id, "),
+    # below a section other than hud: every run rendered and failed for want of the figure (exit 3)
+    ("require a mistyped key below a section", ("--set", f"{PANEL}=1:2:2", "--require",
+                                                "brightness_theorem.ghost.ratio >= 0.1"),
+     "--require brightness_theorem.ghost.ratio >= 0.1: a run's report has no brightness_theorem.ghost.ratio (did "
+     "you mean 'ratio_to_symbol'?)"),
+    ("y of a mistyped key below a section", ("--set", f"{PANEL}=1:2:2", "--y", "luminance.maen"),
+     "--y luminance.maen: a run's report has no luminance.maen (did you mean 'mean'?)"),
 ])
 def test_every_refusal_is_one_line_before_any_run_and_writes_nothing(tmp_path, no_render, case, args, message):
     out = tmp_path / "refused"

@@ -88,13 +88,190 @@ def test_broken_gltf_files_say_what_is_wrong_with_them(mirror, earlier, case):
     assert hashes(out) == before
 
 
+def _box_gltf(folder: Path, edit_tree=None, edit_bin=None) -> int:
+    """A 100 x 100 x 10 mm box (trimesh's export) as meshes/model.gltf and its buffer meshes/model.bin,
+    each spoiled by its ``edit_``, used by the scene's mirror; returns the buffer's length as exported."""
+    import trimesh
+
+    files = trimesh.creation.box(extents=[100, 100, 10]).export(file_type="gltf", merge_buffers=True)
+    tree = json.loads(files["model.gltf"])
+    data = files[tree["buffers"][0]["uri"]]
+    tree["buffers"][0]["uri"] = "model.bin"
+    if edit_tree:
+        edit_tree(tree)
+    (folder / "meshes" / "model.gltf").write_text(json.dumps(tree))
+    (folder / "meshes" / "model.bin").write_bytes(edit_bin(data) if edit_bin else data)
+    edit_json(folder, lambda d: d["objects"][0].update(mesh="meshes/model.gltf"))
+    return len(data)
+
+
+def _box_glb() -> tuple[bytes, int, int]:
+    """The box of :func:`_box_gltf` as a GLB (a 12-byte header, a JSON chunk and a BIN chunk, each of a
+    4-byte length, a 4-byte type and its data): (bytes, the JSON chunk's length, the BIN chunk's)."""
+    import trimesh
+
+    data = trimesh.creation.box(extents=[100, 100, 10]).export(file_type="glb")
+    json_length = int.from_bytes(data[12:16], "little")
+    return data, json_length, int.from_bytes(data[20 + json_length:24 + json_length], "little")
+
+
+def _uint32(n: int) -> bytes:
+    return n.to_bytes(4, "little")
+
+
+def _gltf_case(words: str, edit_tree=None, edit_bin=None, remove_bin=False):
+    """Build a .gltf case of :data:`BROKEN_GLTF` (``words`` formatted with the exported buffer's length n)."""
+    def build(folder: Path) -> tuple[str, str]:
+        n = _box_gltf(folder, edit_tree, edit_bin)
+        if remove_bin:
+            (folder / "meshes" / "model.bin").unlink()
+        return "meshes/model.gltf", words.format(n=n)
+    return build
+
+
+def _glb_case(edit, words: str):
+    """Build a GLB case of :data:`BROKEN_GLTF`: the box's GLB spoiled by ``edit(bytes, json length, bin
+    length)`` as meshes/model.glb (``words`` formatted with the lengths j and b)."""
+    def build(folder: Path) -> tuple[str, str]:
+        data, j, b = _box_glb()
+        (folder / "meshes" / "model.glb").write_bytes(edit(data, j, b))
+        edit_json(folder, lambda d: d["objects"][0].update(mesh="meshes/model.glb"))
+        return "meshes/model.glb", words.format(j=j, b=b)
+    return build
+
+
+#: Broken glTF files built from a good one, which trimesh reported as "cannot read mesh meshes/model.gltf:"
+#: and nothing more (a buffer cut short), "[Errno 2] No such file or directory: '/.../model.bin'",
+#: "cannot reshape array of size 36 into shape (999999,1)", "list index out of range" (read as a face
+#: beyond the vertices), "Expecting value: line 1 column 1 (char 0)", "Extra data: line 1 column 701",
+#: "chunk was not expected length!" and "only GLTF 2 is supported not `1`": case -> build(folder), which
+#: writes the file and returns it and the words its one line must hold.
+BROKEN_GLTF = {
+    "a .gltf whose buffer is cut short": _gltf_case(
+        "its binary buffer meshes/model.bin is 120 bytes, shorter than the {n:,} its bufferViews read",
+        edit_bin=lambda b: b[:120]),
+    "a .gltf whose buffer is missing": _gltf_case("meshes/model.bin, the buffer it names, does not exist",
+                                                  remove_bin=True),
+    "a .gltf whose accessor count is too large": _gltf_case(
+        "its accessor 0 reads 999,999 SCALAR values (3,999,996 bytes, with its offset) from bufferView 0",
+        edit_tree=lambda t: t["accessors"][0].update(count=999_999)),
+    "a .gltf whose mesh names an accessor it lacks": _gltf_case(
+        "its mesh 0's POSITION names accessor 7, but the file has 2 accessors",
+        edit_tree=lambda t: t["meshes"][0]["primitives"][0]["attributes"].update(POSITION=7)),
+    "a .gltf of glTF 1.0": _gltf_case('its asset.version is "1.0"',
+                                      edit_tree=lambda t: t["asset"].update(version="1.0")),
+    "a GLB whose JSON chunk is damaged": _glb_case(
+        lambda d, j, b: d[:20] + bytes(10) + d[30:],
+        "its JSON chunk is not valid JSON (Expecting value at byte 0 of the chunk"),
+    "a GLB whose JSON chunk's length is too large": _glb_case(
+        lambda d, j, b: d[:12] + _uint32(j + 8) + d[16:],
+        "bytes but its JSON ends after {j:,} bytes (its length field is damaged)"),
+    "a GLB whose JSON chunk's length passes its end": _glb_case(
+        lambda d, j, b: d[:12] + _uint32(10**9) + d[16:],
+        "its JSON chunk declares 1,000,000,000 bytes, more than the"),
+    "a GLB whose binary chunk is cut short": _glb_case(
+        lambda d, j, b: d[:8] + _uint32(len(d) - 40) + d[12:-40],
+        "its binary chunk declares {b:,} bytes but the file holds"),
+    "a GLB of glTF 1": _glb_case(lambda d, j, b: d[:4] + _uint32(1) + d[8:], "its header gives glTF version 1;"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN_GLTF))
+def test_broken_gltf_buffers_and_chunks_are_named_in_one_line(mirror, earlier, case):
+    """A glTF whose buffers, bufferViews, accessors or GLB chunks do not fit together is refused before
+    the first ray in one line that names the file and says what is wrong in its own terms (bytes held
+    and read, the buffer's file), never the parser's words; the earlier outputs untouched."""
+    out, before = earlier
+    name, words = BROKEN_GLTF[case](mirror)
+    code, err = run_cli("render", mirror, "--rays", 10**12, "--workers", 1, "--quiet", "--out", out)
+    assert_one_line_error(code, err, "scene.json", "objects[0].mesh", f"cannot read mesh {name}: ", words)
+    for parser_words in ("Errno", "reshape", "Extra data", "line 1 column", "expected length", "GLTF 2"):
+        assert parser_words not in err, err
+    assert hashes(out) == before
+
+
+def test_gltf_files_whose_buffers_lie_in_other_files_load(mirror):
+    """The controls of the broken files: the box as a .gltf and its .bin, and as a GLB whose buffer lies
+    in a .bin beside it (parsed from the GLB's bytes without trimesh's resolver, it failed "'NoneType'
+    object is not subscriptable"); neither is kept by its own content (the .bin may change alone)."""
+    import hashlib
+
+    from tracer.scene import meshes
+
+    _box_gltf(mirror)
+    assert len(load_scene(mirror).objects[0].faces) == 12
+    data, j, _ = _box_glb()
+    tree = json.loads(data[20:20 + j])
+    tree["buffers"][0]["uri"] = "model.bin"
+    (mirror / "meshes" / "model.bin").write_bytes(data[28 + j:])
+    text = json.dumps(tree).encode()
+    text += b" " * (-len(text) % 4)  # a chunk is padded to 4 bytes (JSON with spaces)
+    chunk = _uint32(len(text)) + b"JSON" + text
+    glb = b"glTF" + _uint32(2) + _uint32(12 + len(chunk)) + chunk
+    (mirror / "meshes" / "model.glb").write_bytes(glb)
+    edit_json(mirror, lambda d: d["objects"][0].update(mesh="meshes/model.glb"))
+    assert len(load_scene(mirror).objects[0].faces) == 12
+    assert (".glb", hashlib.sha256(glb).digest()) not in set(meshes._READ)
+    assert not any(k[0] == ".gltf" for k in meshes._READ)
+
+
 def test_an_obj_quad_with_texture_coordinates_loads_without_warnings(mirror):
     """trimesh's median over the split quad's texture coordinates warned "All-NaN slice" twice on every
-    load (the suite turns RuntimeWarnings into errors)."""
+    load (the suite turns RuntimeWarnings into errors), and the quad lost its texture coordinates, on
+    any object (a mirror here; an LCD in the test below)."""
     quad = "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n"
     (mirror / "meshes" / "quad.obj").write_text(quad)
     edit_json(mirror, lambda d: d["objects"][0].update(mesh="meshes/quad.obj"))
-    assert len(load_scene(mirror).objects[0].faces) == 2
+    mirror_object = load_scene(mirror).objects[0]
+    assert len(mirror_object.faces) == 2
+    np.testing.assert_array_equal(mirror_object.uv, [[0, 0], [1, 0], [1, 1], [0, 1]])
+
+
+def _corners(faces: np.ndarray) -> set:
+    """The triangles ``faces`` as a set, each from its least index on (the same triangle, wound the same
+    way, whichever corner a file or a split begins it with)."""
+    return {tuple(np.roll(t, -int(np.argmin(t)))) for t in faces.tolist()}
+
+
+#: An LCD's screen saved as faces of four corners or more with texture coordinates, and the same screen
+#: as triangles: (the face lines, those of the triangles; one more vertex, the middle of the lower edge,
+#: and its texture coordinate follow the preset's four).
+LCD_POLYGONS = {
+    "a quad": ("f 1/1 2/2 4/4 3/3\n", "f 1/1 2/2 4/4\nf 1/1 4/4 3/3\n"),
+    "a quad with normals": ("vn 0 0 1\nf 1/1/1 2/2/1 4/4/1 3/3/1\n", "f 1/1 2/2 4/4\nf 1/1 4/4 3/3\n"),
+    "a pentagon": ("f 1/1 5/5 2/2 4/4 3/3\n", "f 1/1 5/5 2/2\nf 1/1 2/2 4/4\nf 1/1 4/4 3/3\n"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(LCD_POLYGONS))
+def test_an_lcd_of_quads_or_polygons_keeps_its_texture_coordinates(preset, case):
+    """hud-direct's LCD saved as one quad (or a pentagon) with vt lines was refused, "an LCD needs texture
+    coordinates (an OBJ with vt lines)": trimesh, keeping the file's vertices (maintain_order), looked
+    texture coordinates up in the first three corners of each face only. It loads as the same screen
+    as its triangles: the same vertices, in the file's order, the same texture coordinates and triangles."""
+    folder = preset("hud-direct", resolution=(8, 4))
+    spec = next(o for o in json.loads((folder / "scene.json").read_text())["objects"] if o["name"] == "lcd")
+    assert spec["material"]["type"] == "lcd"
+    mesh = folder / spec["mesh"]
+    lines = mesh.read_text().splitlines()
+    v = [ln for ln in lines if ln.startswith("v ")]
+    vt = [ln for ln in lines if ln.startswith("vt ")]
+    assert len(v) == len(vt) == 4
+
+    def middle(a: str, b: str) -> str:  # the line of the point halfway between two
+        (key, *xa), (_, *xb) = a.split(), b.split()
+        return " ".join([key] + [repr((float(x) + float(y)) / 2) for x, y in zip(xa, xb, strict=True)])
+
+    head = "\n".join(v + [middle(v[0], v[1])] + vt + [middle(vt[0], vt[1])]) + "\n"
+    polygon, triangles = LCD_POLYGONS[case]
+    mesh.write_text(head + triangles)
+    twin = load_scene(folder).object("lcd")
+    mesh.write_text(head + polygon)
+    lcd = load_scene(folder).object("lcd")
+    assert lcd.uv is not None
+    np.testing.assert_array_equal(lcd.vertices, twin.vertices)
+    np.testing.assert_array_equal(lcd.uv, twin.uv)
+    assert _corners(lcd.faces) == _corners(twin.faces)
 
 
 def _glass(folder: Path, faces_edit) -> None:

@@ -19,6 +19,10 @@ Kinds (JSON value -> parsed value):
   sibling field ``<name>_encoding`` when the schema has one (the path is kept as ``<name>_file``);
 - ``"group"``: a nested block of ``fields`` (optional as a whole when its default is ``None``).
 
+A field whose range is [0, 1] holds factors (a transmittance, a reflectance, a share): a positive number
+below :data:`tracer.core.validate.MIN_FACTOR`, or a positive component below it of an ``"rgb"`` or other
+list, is refused (it would underflow the float32 path weights); 0 stays allowed.
+
 Kinds of the scene format's own blocks (tracer.scene.format), which the scene loader reads itself:
 ``"vector3"`` ([x, y, z]), ``"int2"`` (two integers), ``"matrix4"`` (four rows of four numbers) and
 ``"list"`` (a list of blocks). A number field may also take one of its ``keywords`` (the pupil's
@@ -128,6 +132,27 @@ class Schema:
         return req, opt | ({"aim"} if self.can_aim else set())
 
 
+def _is_factor(f: Field) -> bool:
+    """Whether field ``f`` holds factors: numbers in [0, 1] (a transmittance, a reflectance, a share; each
+    component of an RGB one), by which a path's weight is multiplied."""
+    return f.minimum == 0.0 and f.maximum == 1.0
+
+
+def _refuse_underflow(ck: FieldChecker, f: Field, v: float, where: str, channel: str = ""):
+    """Refuse a positive factor below :data:`~tracer.core.validate.MIN_FACTOR` (0 stays allowed where the
+    field's range allows it: no light passes): the float32 path weights hold about 1e-38, and a path meets
+    several such factors, so the image would come out black without a warning. ``channel`` names the
+    component of a list ("red")."""
+    if _is_factor(f) and 0.0 < v < MIN_FACTOR:
+        of = f" ({channel})" if channel else ""
+        ck.fail(where, f"{v:g}{of} is below {MIN_FACTOR:g}: a factor this small underflows the tracer's float32 "
+                       "path weights (the image would come out black); give 0 or at least that")
+
+
+#: Names of the components of an RGB list, for messages.
+_CHANNELS = ("red", "green", "blue")
+
+
 def _vector(ck: FieldChecker, value, fld: str, f: Field, n: int, scalar_ok: bool) -> np.ndarray:
     if isinstance(value, list):
         v = ck.vector(value, fld, n)
@@ -137,6 +162,7 @@ def _vector(ck: FieldChecker, value, fld: str, f: Field, n: int, scalar_ok: bool
         where = [fld] * n
     else:
         ck.fail(fld, f"expected a list of {n} numbers, got {json.dumps(value)}")
+    channels = _CHANNELS if isinstance(value, list) and f.kind == "rgb" else ("",) * n
     for i in range(n):
         lo_bad = f.minimum is not None and (v[i] < f.minimum or (f.exclusive_min and v[i] == f.minimum))
         hi_bad = f.maximum is not None and (v[i] > f.maximum or (f.exclusive_max and v[i] == f.maximum))
@@ -145,6 +171,7 @@ def _vector(ck: FieldChecker, value, fld: str, f: Field, n: int, scalar_ok: bool
             hi = "inf" if f.maximum is None else f"{f.maximum:g}"
             opening, closing = "(" if f.exclusive_min else "[", ")" if f.exclusive_max else "]"
             ck.fail(where[i], f"must lie in {opening}{lo}, {hi}{closing}, got {v[i]:g}")
+        _refuse_underflow(ck, f, float(v[i]), where[i], channels[i])
     return v
 
 
@@ -154,9 +181,7 @@ def parse_value(ck: FieldChecker, f: Field, value, fld: str, root: Path | None, 
     if k == "number":
         v = ck.number(value, fld, min_value=f.minimum, min_exclusive=f.exclusive_min, max_value=f.maximum,
                       max_exclusive=f.exclusive_max)
-        if f.minimum == 0.0 and f.maximum == 1.0 and 0.0 < v < MIN_FACTOR:
-            ck.fail(fld, f"{v:g} is below {MIN_FACTOR:g}: a factor this small underflows the tracer's float32 path "
-                         "weights (the image would come out black); give 0 or at least that")
+        _refuse_underflow(ck, f, v, fld)
         return v
     if k == "int":
         if isinstance(value, bool) or not isinstance(value, int):
