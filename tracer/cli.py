@@ -632,8 +632,7 @@ def cmd_sweep(args) -> int:
     except KeyboardInterrupt as e:
         if flag.stop:  # a second stop signal, once the sweep's own handler had taken the first
             return _write_errors(e, args.out)
-        print("interrupted before the work began (the grid's scenes were being checked): nothing written",
-              file=sys.stderr)
+        print("interrupted before the first run began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
         return _write_errors(e, args.out)

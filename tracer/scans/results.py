@@ -168,7 +168,8 @@ class SweepResult:
         rec = self.recommendation()
         if not self.plan.requirements:
             stopped = len(self.runs) - len(self.judged)
-            return (f"{len(self.judged)} runs rendered to their budget"
+            n = len(self.judged)
+            return (f"{n} run{'' if n == 1 else 's'} rendered to their budget"
                     + (f" ({stopped} stopped early)" if stopped else "") + "; no requirements given")
         if rec["none"]:
             if "closest" not in rec:
