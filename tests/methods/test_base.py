@@ -277,3 +277,15 @@ def test_auto_renders_the_same_image_when_its_roulette_pilots_are_kept(preset):
     assert first.rays == second.rays and np.array_equal(first.film.rgb(), second.film.rgb())
     a, b = first.extra["channels"]["scene"], second.extra["channels"]["scene"]
     assert a["method"] == b["method"] and [p["rays"] for p in a["pilots"]] == [p["rays"] for p in b["pilots"]]
+
+
+@pytest.mark.parametrize("method", ["backward", "forward", "auto"])
+def test_a_scene_without_any_light_source_ends_after_its_first_batch(mirror, method):
+    """A second walk-through: Blender's startup scene (its point light is not exported) traced its whole
+    budget (10 s) for a black image. With no emitter and a black environment the first batch says so and
+    the render ends there, whatever its budget."""
+    edit_json(mirror, lambda d: d["objects"][2]["emission"].update(luminance=0.0))
+    t0 = time.perf_counter()
+    res = INTEGRATORS[method](load_scene(mirror), 1, 4096).render(Budget(rays=10**12, seconds=600.0))
+    assert res.batches == 1 and time.perf_counter() - t0 < 60.0
+    assert any(w.startswith("the scene has no light source") for w in res.warnings), res.warnings

@@ -520,6 +520,9 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     setup = time.perf_counter() - start  # the pilot, the workers' start-up
 
     workers = getattr(executor, "workers", 1)
+    # A scene without any light source (no emitter, a black environment): its first batch says so, and the
+    # budget would be spent on a black image (Blender's startup scene traced its 10 s)
+    dark = len(local.world.lights) == 0 and local.world.environment.is_black
 
     def short() -> bool:
         """No batch merged yet: a render holds at least one, however short its budget."""
@@ -577,8 +580,8 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
         if preview is not None and merged > 0 and not met() and time.perf_counter() - shown >= PREVIEW_SECONDS:
             preview(film)
             shown = time.perf_counter()
-        if rays == 0 and merged > 0:
-            break  # nothing to trace (no source, no geometry): more batches cannot help
+        if (rays == 0 or dark) and merged > 0:
+            break  # nothing to trace, or no light source to find (the image is black): more batches cannot help
     seconds = time.perf_counter() - start
     result = RenderResult(local.name, local.seed, film, rays, paths, found, seconds, partial, merged,
                           list(local.warnings), dict(extra))
