@@ -217,7 +217,14 @@ def _object_annotations() -> dict:
 
 
 HudSceneSettings = type("HudSceneSettings", (bpy.types.PropertyGroup,), {"__annotations__": _scene_annotations()})
-HudObjectSettings = type("HudObjectSettings", (bpy.types.PropertyGroup,), {"__annotations__": _object_annotations()})
+def _role_starting_value(self, name: str):
+    """The value the object's property ``name`` starts from under its role (ROLE_STARTS), or None (the
+    property's declared default): what Reset to Default Value puts back (hud_addon.units.starting_value)."""
+    return ROLE_STARTS.get(self.role, {}).get(name)
+
+
+HudObjectSettings = type("HudObjectSettings", (bpy.types.PropertyGroup,),
+                         {"__annotations__": _object_annotations(), "starting_value": _role_starting_value})
 
 
 class HudCameraSettings(bpy.types.PropertyGroup):

@@ -12,6 +12,7 @@ for a group: ``prefix + group + "_use"`` (whether it is given) and its fields un
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import bpy
@@ -27,7 +28,7 @@ from bpy.props import (
 )
 
 from ..tracer.core.schema import REQUIRED, Field, to_json
-from .units import SHOWN, angle_twin, length_twin
+from .units import SHOWN, angle_twin, length_twin, starting_value
 
 #: Field kinds with one value (size 0) or two.
 _SIZES = {"number": 0, "pair": 2, "vector2": 2}
@@ -45,16 +46,18 @@ def _factor(f: Field) -> bool:
 
 def grey_twin(stored: str, f: Field):
     """The number that sets R, G and B of the factor property ``stored`` at once (it reads their mean:
-    the value itself while they are equal)."""
+    the value itself while they are equal). Its declared default is NaN, which puts the stored value's
+    starting value back (Reset to Default Value; hud_addon.units.starting_value): a default of 0 had made
+    a mirror black."""
     def get(self):
         return float(sum(getattr(self, stored))) / 3.0
 
     def set_(self, value):
-        setattr(self, stored, (value,) * 3)
+        setattr(self, stored, starting_value(self, stored) if math.isnan(value) else (value,) * 3)
 
     return FloatProperty(name=f.title, description=_tooltip(f) + " The same for R, G and B (the colour "
                          "button beside it gives them apart)", min=f.minimum or 0.0, max=f.maximum, precision=4,
-                         get=get, set=set_)
+                         get=get, set=set_, default=math.nan)
 
 
 def twin(f: Field, name: str):

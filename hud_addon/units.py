@@ -30,22 +30,32 @@ def _mm_per_unit() -> float:
     return unit_mm(scene) if scene is not None else M_TO_MM
 
 
+def starting_value(owner, stored: str):
+    """The value ``owner``'s property ``stored`` starts from: the owner's own ``starting_value(stored)``
+    where it has one and gives one (an object's optical role: a coating's Reflectance is 0.25, where the
+    property that every role shares declares the mirror's 0.9), else the property's declared default."""
+    own = getattr(owner, "starting_value", None)
+    value = own(stored) if own is not None else None
+    if value is None:
+        prop = owner.bl_rna.properties[stored]
+        value = tuple(prop.default_array) if prop.is_array else prop.default
+    return value
+
+
 def _twin(stored: str, size: int, to_shown, from_shown, **kw):
     """A property whose value is ``to_shown(stored value)`` and which stores ``from_shown(value)``.
 
-    Its declared default is NaN, and a NaN set on it resets the stored property to its own default:
-    Blender's Reset to Default Value sets a property's declared default, which a twin cannot know (a
-    length's depends on the scene's unit), and a default of 0 had set a pupil of 0.01 mm and an eye of
-    0.1 mm focal length."""
+    Its declared default is NaN, and a NaN set on it (or on one of its components) puts the stored
+    value's starting value there (:func:`starting_value`): Blender's Reset to Default Value sets a
+    property's declared default, which a twin cannot know (a length's depends on the scene's unit), and a
+    default of 0 had set a pupil of 0.01 mm and an eye of 0.1 mm focal length."""
     if size:
         def get(self):
             return tuple(to_shown(v) for v in getattr(self, stored))
 
         def set_(self, value):
-            if any(math.isnan(v) for v in value):
-                self.property_unset(stored)
-            else:
-                setattr(self, stored, tuple(from_shown(v) for v in value))
+            start = starting_value(self, stored) if any(math.isnan(v) for v in value) else None
+            setattr(self, stored, tuple(start[i] if math.isnan(v) else from_shown(v) for i, v in enumerate(value)))
 
         return FloatVectorProperty(size=size, get=get, set=set_, default=(math.nan,) * size, **kw)
 
@@ -53,10 +63,7 @@ def _twin(stored: str, size: int, to_shown, from_shown, **kw):
         return to_shown(getattr(self, stored))
 
     def set1(self, value):
-        if math.isnan(value):
-            self.property_unset(stored)
-        else:
-            setattr(self, stored, from_shown(value))
+        setattr(self, stored, starting_value(self, stored) if math.isnan(value) else from_shown(value))
 
     return FloatProperty(get=get1, set=set1, default=math.nan, **kw)
 

@@ -6,6 +6,7 @@ tests/addon/blender_runner.py (tests.support.addon.in_blender)."""
 
 from __future__ import annotations
 
+import math
 import tempfile
 from pathlib import Path
 
@@ -113,6 +114,15 @@ def scenario_reset_twins():
         setattr(owner, twin, tuple(prop.default_array) if prop.is_array else prop.default)
         out[stored] = {"moved": list(moved) if prop.is_array else moved,
                        "reset": list(getattr(owner, stored)) if prop.is_array else getattr(owner, stored)}
+    s.eyebox_field_deg_shown = (0.2, 0.1)
+    s.eyebox_field_deg_shown = (math.nan, 0.1)  # Reset Single Value: one component
+    out["one component"] = list(s.eyebox_field_deg)
+    bpy.ops.mesh.primitive_plane_add(size=0.1)
+    h = bpy.context.object.hud
+    h.role = "coating"
+    h.reflectance_grey = 0.5  # the single number the panel shows for a grey factor
+    h.reflectance_grey = h.bl_rna.properties["reflectance_grey"].default
+    out["coating grey"] = list(h.reflectance)
     disable(module)
     return out
 
@@ -127,3 +137,7 @@ def test_reset_to_default_of_a_field_in_the_scenes_units_gives_its_default():
     assert res["focal_length_mm"]["moved"] == pytest.approx(20.0) and \
         res["focal_length_mm"]["reset"] == pytest.approx(16.67)
     assert res["eyebox_field_deg"]["reset"] == pytest.approx([6.0, 2.0])
+    assert res["one component"] == pytest.approx([6.0, math.degrees(0.1)])  # the other component kept
+    # the single Reflectance number of a coating resets to the coating's start, not 0 (a black mirror) nor
+    # the 0.9 every role's shared property declares
+    assert res["coating grey"] == pytest.approx([0.25] * 3)
