@@ -28,8 +28,8 @@ the scene (eyebox.json's ``valid`` is false and stderr says why); 4 the outputs 
 sweep.csv, sweep.json and sweep.png, as one set: 0 written; 2 bad input, before any ray (nothing
 written); 3 written, but no run meets the requirements (``--require``); 4 the outputs could not be
 written (the folder keeps its earlier sweep); 130 stopped by Ctrl-C, SIGTERM or SIGHUP: the current
-run stops as ``render`` does and the runs done are written, marked partial; 5 aborted by a second
-Ctrl-C (nothing written).
+run stops as ``render`` does and the runs done are written, marked partial (nothing, where the stop came
+before the first run began); 5 aborted by a second Ctrl-C (nothing written).
 """
 
 from __future__ import annotations
@@ -578,6 +578,7 @@ def cmd_sweep(args) -> int:
     keep_freed_memory()
     budget = None if args.optics else Budget(rays=args.rays, seconds=args.seconds)
     flag = StopFlag()
+    began = False  # the runs, with the sweep's own stop handlers
     bar = None if args.quiet else ProgressBar()
     absent: set[str] = set()
 
@@ -617,6 +618,7 @@ def cmd_sweep(args) -> int:
                 if crowded:
                     print(f"warning: {crowded}", file=sys.stderr)
                 previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
+                began = True
                 try:
                     result = run_sweep(plan, "optics" if args.optics else args.method, budget, args.seed, outputs,
                                        workers=args.workers, scheduler=args.scheduler,
@@ -630,8 +632,8 @@ def cmd_sweep(args) -> int:
         print(f"error: {e.argument}: {e.message}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt as e:
-        if flag.stop:  # a second stop signal, once the sweep's own handler had taken the first
-            return _write_errors(e, args.out)
+        if flag.stop or began:  # a second stop signal, or one once the runs were done and their set in place
+            return _write_errors(e, args.out, flag.written())
         print("interrupted before the first run began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
@@ -859,9 +861,38 @@ def _stop_signals_interrupt() -> dict:
         return {}
 
 
+def _sets_committed() -> int:
+    """Output sets moved into place by this process so far (tracer.products.outputs.committed; 0 before
+    that module is imported)."""
+    outputs = sys.modules.get(f"{__package__}.products.outputs")
+    return outputs.committed() if outputs is not None else 0
+
+
+def _end_session():
+    """End the worker pool the command's renders shared (with the command, not at the interpreter's exit)
+    and its Dask clients, with the stop signals ignored: the command's work is done or given up, and a
+    signal that lands in the pool's bounded join (a second Ctrl-C just after the set was written) had
+    printed a traceback."""
+    try:
+        held = {s: signal.signal(s, signal.SIG_IGN) for s in STOP_SIGNALS}
+    except ValueError:  # not the main thread
+        held = {}
+    try:
+        parallel = sys.modules.get(f"{__package__}.runtime.parallel")
+        if parallel is not None:
+            parallel.close_shared_pool()
+        distributed = sys.modules.get(f"{__package__}.runtime.distributed")
+        if distributed is not None:
+            distributed.close_clients()
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     started = _command_start()
     previous = _stop_signals_interrupt()
+    written = _sets_committed()
     try:
         if _import_holding_interrupts():
             raise KeyboardInterrupt
@@ -871,18 +902,16 @@ def main(argv: list[str] | None = None) -> int:
     except (SceneError, ArgumentError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_INPUT
-    except KeyboardInterrupt:  # before a command installs its own handler (while its modules import)
-        print("interrupted before the work began: nothing written", file=sys.stderr)
+    except KeyboardInterrupt:  # before a command installs its own handlers, or after it has put them back
+        if _sets_committed() > written:
+            print("interrupted after the outputs were written: the output folder holds them", file=sys.stderr)
+        else:
+            print("interrupted before the work began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
-    finally:  # the worker pool the command's renders shared ends with the command, not at the interpreter's exit
+    finally:
+        _end_session()
         for s, handler in previous.items():
             signal.signal(s, handler)
-        parallel = sys.modules.get(f"{__package__}.runtime.parallel")
-        if parallel is not None:
-            parallel.close_shared_pool()
-        distributed = sys.modules.get(f"{__package__}.runtime.distributed")
-        if distributed is not None:
-            distributed.close_clients()
 
 
 if __name__ == "__main__":

@@ -263,3 +263,22 @@ def test_a_stop_signal_while_a_sweep_checks_its_grid_ends_it_with_nothing_writte
     assert code == 130 and "interrupted before the first run began" in err and "Traceback" not in err, err
     assert not out.exists()
     assert signal.getsignal(signal.SIGTERM) == before  # main() puts back the handler it found
+
+
+def test_a_stop_signal_while_the_command_ends_its_worker_pool_is_ignored(mirror, tmp_path, monkeypatch):
+    """A second Ctrl-C that landed as the command ended its worker pool, after the set was written (the
+    pool's bounded join), printed a KeyboardInterrupt traceback (a fresh-clone CI run, 2026-12-07). The
+    work is done there: the stop signals are ignored while the session ends."""
+    from tracer.runtime import parallel
+
+    real = parallel.close_shared_pool
+
+    def signalled(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # where the handler would raise
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(parallel, "close_shared_pool", signalled)
+    code, err = run_cli("render", mirror, "--rays", 100_000, "--workers", 1, "--quiet", "--out", tmp_path / "o")
+    assert code == 0 and "Traceback" not in err, err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
