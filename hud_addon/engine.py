@@ -252,8 +252,9 @@ def render_final(engine, depsgraph) -> dict:
             return _fail(engine, scene, f"{e}: nothing rendered", "stopped")
         except (TracerError, RuntimeError, FloatingPointError, OSError) as e:
             engine.end_result(rr)
-            where = "" if scheduler is None or isinstance(e, TracerError) else \
-                f"Render Properties > HUD Tracer > Dask Scheduler {scheduler}: "
+            cluster = scheduler is not None and (str(e).startswith("on the Dask worker")
+                                                 or type(e).__module__.split(".")[0] == "distributed")
+            where = f"Render Properties > HUD Tracer > Dask Scheduler: {scheduler}: " if cluster else ""
             return _fail(engine, scene, where + one_line(e))
         except Exception as e:  # a fault of the tracer: the result is ended (Blender crashes on an open one)
             engine.end_result(rr)

@@ -152,8 +152,13 @@ def dark_scene_hint(scene) -> str:
     """For a render with no light source, in Blender's terms: the lights Blender shows that the tracer
     does not take (all but Sun lights) and the meshes left out for want of an optical role ("" where
     there are none)."""
-    lights = [o for o in scene.objects if o.type == "LIGHT" and o.data.type != "SUN" and not o.hide_render]
-    plain = [o.name for o in scene.objects if o.type == "MESH" and o.hud.role == "none" and not o.hide_render]
+    from .export import render_visible
+    from .operators import LIGHT_PATHS_TAG
+
+    visible = render_visible(bpy.context.view_layer)
+    shown = [o for o in scene.objects if o.name in visible]
+    lights = [o for o in shown if o.type == "LIGHT" and o.data.type != "SUN"]
+    plain = [o.name for o in shown if o.type == "MESH" and o.hud.role == "none" and not o.get(LIGHT_PATHS_TAG)]
     parts = []
     if lights:
         names = ", ".join(f"{o.data.type.title()} light {o.name!r}" for o in lights[:3])

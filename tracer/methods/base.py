@@ -98,16 +98,17 @@ def _side_sees(world, o, side: float) -> bool:
         return False
     normal = side * normal
     centre = t.mean(axis=1)
-    size = max(float(np.ptp(t.reshape(-1, 3), axis=0).max()), 1.0)
     eye = np.asarray(world.eye.position, dtype=np.float64)
     to_eye = eye - centre
     facing = np.einsum("ij,ij->i", to_eye, normal) > 0
     if facing.any():
         if world.accel is None:
             return True
-        o_, d = (centre + normal * size * 1e-6)[facing].T, to_eye[facing].T
+        d = to_eye[facing].T
         dist = np.linalg.norm(d, axis=0)
-        if not world.accel.occluded(o_, (d / dist).astype(np.float32), dist * (1 - 1e-9)).all():
+        d = d / dist
+        o_ = world.accel.spawn(centre[facing].T, normal[facing].T, d)
+        if not world.accel.occluded(o_, d.astype(np.float32), dist * (1 - 1e-9)).all():
             return True
     if world.accel is None:
         return False
@@ -118,7 +119,7 @@ def _side_sees(world, o, side: float) -> bool:
     p = (tri[:, 0] * (1 - b[0] - b[1])[:, None] + tri[:, 1] * b[0][:, None] + tri[:, 2] * b[1][:, None]).T
     n = normal[face].T
     d = to_world(cosine_hemisphere(rng.random((2, FACING_RAYS))), *frame_from_normal(n))
-    f = world.accel.intersect(p + n * size * 1e-6, d.astype(np.float32)).face
+    f = world.accel.intersect(world.accel.spawn(p, n, d), d.astype(np.float32)).face
     other = (f >= 0) & (world.accel.face_slot[np.maximum(f, 0)] != o.slot)
     return bool(np.any(other & (world.face_group[f] >= 0)))
 
@@ -140,8 +141,8 @@ def facing_hint(world) -> str:
     """Where no light was found: the one-sided emitters that face the wrong way (:func:`_faces_away`), a
     likely cause ("" where none does). In a HUD the LEDs face the optics, away from the eye: what
     decides is what the emitter is aimed at or what each of its sides sees, not where the eye is."""
-    away = [o.name for o in world.scene.objects
-            if o.emission is not None and not o.emission.two_sided and _faces_away(world, o)]
+    away = [o.name for o in world.scene.objects if o.emission is not None and o.emission.luminance > 0
+            and not o.emission.two_sided and _faces_away(world, o)]
     if not away:
         return ""
     names = ", ".join(repr(n) for n in away)
@@ -402,7 +403,8 @@ class Integrator:
         result.extra["roulette"] = {"reference_luminance_cd_m2": self.reference_luminance,
                                     "threshold_cd_m2": Roulette(self.reference_luminance).threshold,
                                     "pilot_rays": self.pilot_rays}
-        if result.found == 0 and len(self.world.lights) == 0 and self.world.environment.is_black:
+        dark = len(self.world.lights) == 0 and self.world.environment.is_black
+        if result.found == 0 and dark:
             result.warnings.append(
                 f"{NO_LIGHT_SOURCE} (no object with an emission block of positive luminance, no lit "
                 "environment): the image is black because the scene is dark")
@@ -416,7 +418,8 @@ class Integrator:
                 f"only {result.found} of {result.paths:,} paths found light (efficiency {result.efficiency:.3g}): "
                 "the image is dominated by noise")
         film = result.film
-        counts = film.sample_counts() if result.batches else None
+        # a scene without a light source stops after one batch (drive): more samples would not help it
+        counts = film.sample_counts() if result.batches and not dark else None
         if counts is not None and counts.min() < MIN_REPLICATES:  # batches covered part of the image
             few = int((counts < MIN_REPLICATES).sum())
             none = int((counts == 0).sum())
@@ -426,7 +429,7 @@ class Integrator:
                 "them out"
                 + (f"; {none:,} hold none and show their nearest sampled neighbour's value" if none else "")
                 + "; render longer for error bars on every pixel")
-        elif result.batches and film.groups and film.fewest_replicates < MIN_REPLICATES:  # a render stopped early
+        elif result.batches and not dark and film.groups and film.fewest_replicates < MIN_REPLICATES:  # stopped early
             result.warnings.append(
                 f"the error bars are not measured: the film holds {film.fewest_replicates} replicate(s) where their "
                 f"spread needs {MIN_REPLICATES}, so every standard error and Y_var reads 0; render longer")
