@@ -578,7 +578,7 @@ def cmd_sweep(args) -> int:
     keep_freed_memory()
     budget = None if args.optics else Budget(rays=args.rays, seconds=args.seconds)
     flag = StopFlag()
-    began = False  # the runs, with the sweep's own stop handlers
+    began = written = False  # the runs began, with the sweep's own stop handlers; the sweep's set is in place
     bar = None if args.quiet else ProgressBar()
     absent: set[str] = set()
 
@@ -623,6 +623,7 @@ def cmd_sweep(args) -> int:
                     result = run_sweep(plan, "optics" if args.optics else args.method, budget, args.seed, outputs,
                                        workers=args.workers, scheduler=args.scheduler,
                                        batch_size=args.batch_size, progress=bar, should_stop=flag, on_run=on_run)
+                    written = True  # run_sweep returns once its set is in place
                 finally:
                     for s, handler in previous.items():
                         signal.signal(s, handler)
@@ -632,8 +633,8 @@ def cmd_sweep(args) -> int:
         print(f"error: {e.argument}: {e.message}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt as e:
-        if flag.stop or began:  # a second stop signal, or one once the runs were done and their set in place
-            return _write_errors(e, args.out, flag.written())
+        if flag.stop or began:  # a second stop signal (its runs' own sets are in the staging folder, not --out),
+            return _write_errors(e, args.out, written)  # or one once the sweep's set was in place
         print("interrupted before the first run began: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (*WRITE_ERRORS, OutputError) as e:
