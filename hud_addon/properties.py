@@ -191,7 +191,9 @@ def _object_annotations() -> dict:
     check_consistent([cls.schema for cls in MATERIALS.values()])
     ann = {
         "role": EnumProperty(name="Optical role", items=ROLE_ITEMS, default="none", update=_role_changed,
-                             description="The tracer material of this object"),
+                             description="The tracer material of this object. Choosing one gives its fields "
+                                         "the role's own starting values where they still hold the role "
+                                         "before's (a script sets the role first, then the values)"),
         "started_role": StringProperty(name="Started role", default="", options={"HIDDEN"},
                                        description="The role whose starting values the fields were given last"),
         "smooth_normals": BoolProperty(name="Smooth normals", default=False,
