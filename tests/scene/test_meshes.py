@@ -392,3 +392,23 @@ def test_an_obj_that_names_a_material_library_is_read_anew_each_time(preset):
     (folder / Path(obj["mesh"]).parent / "materials.mtl").write_text("newmtl m\nKd 1 1 1\n")
     load_scene(folder)
     assert len(meshes._READ) == kept  # read, not kept
+
+
+def test_a_gltfs_buffer_is_part_of_the_scene_and_must_lie_in_its_folder(mirror):
+    """A .gltf's buffer (.bin) is a file of the scene: the scene's hash changes with it (it did not: a
+    worker or a kept result could take an edited buffer for the old scene), and one outside the scene
+    folder is refused as a mesh file outside it is, unless external files are allowed (it was read)."""
+    import shutil
+
+    from tracer.core.errors import SceneError
+
+    _box_gltf(mirror)
+    before = load_scene(mirror).scene_hash
+    path = mirror / "meshes" / "model.bin"
+    path.write_bytes(path.read_bytes()[:-4] + b"\0\0\0\0")  # the last index moved: the same size
+    assert load_scene(mirror).scene_hash != before
+    _box_gltf(mirror, edit_tree=lambda t: t["buffers"][0].update(uri="../../outside.bin"))
+    shutil.move(path, mirror.parent / "outside.bin")  # beside the scene folder, named by "../../"
+    with pytest.raises(SceneError, match=r"objects\[0\]\.mesh.*outside\.bin: must be a path inside the scene folder"):
+        load_scene(mirror)
+    assert len(load_scene(mirror, allow_external=True).objects[0].faces) == 12

@@ -48,7 +48,7 @@ from .format import (
     TRANSFORM_PARTS,
     VERSION,
 )
-from .meshes import check_closed_outward, load_mesh
+from .meshes import check_closed_outward, files_beside, load_mesh
 from .methods import parse_methods
 from .model import Aim, EyeSpec, Material, Scene, SceneObject
 from .surfaces import load_surfaces
@@ -383,6 +383,7 @@ def load_scene(path: str | Path, allow_external: bool = False) -> Scene:
             rel = ck.string(o["mesh"], f"{fld}.mesh")
             files.append(rel)
             v, f, uv = load_mesh(ck, root, rel, f"{fld}.mesh")
+            files += files_beside(ck, root, rel, f"{fld}.mesh")
         else:
             rel = f"{fld}.windshield"
             v, f, uv, surfaces_spec = _windshield(ck, o, fld, mat)

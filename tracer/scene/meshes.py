@@ -409,6 +409,44 @@ def load_mesh(ck: FieldChecker, root: Path, rel: str, fld: str):
     return v, f, uv
 
 
+#: An OBJ's material libraries (``mtllib`` lines, names separated by blanks).
+_OBJ_MTLLIB = re.compile(rb"(?m)^[ \t]*mtllib[ \t]+([^\r\n#]+)")
+
+
+def files_beside(ck: FieldChecker, root: Path, rel: str, fld: str) -> list[str]:
+    """The files mesh ``rel`` (read and checked by :func:`load_mesh`) reads beside itself, relative to the
+    scene folder ``root``: a glTF's buffers and images named by "uri" (data: URIs aside), an OBJ's
+    material libraries. Each must lie inside the scene folder unless external files are allowed
+    (:meth:`FieldChecker.path`): the folder is what is copied, zipped for a cluster and hashed, and a
+    buffer outside it was read all the same. Those that exist are returned, for the scene's hash (a
+    changed .bin is another scene; its .gltf alone did not show it)."""
+    from urllib.parse import unquote
+
+    path = Path(root) / rel
+    suffix = path.suffix.lower()
+    if suffix not in (".obj", ".gltf", ".glb"):
+        return []
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        ck.fail(fld, f"{rel}: cannot be read ({e.strerror or e})")
+    if not _reads_other_files(suffix, data):
+        return []
+    if suffix == ".obj":
+        names = [n.decode("utf-8", "replace") for m in _OBJ_MTLLIB.finditer(data) for n in m[1].split()]
+    else:
+        text = data if suffix == ".gltf" else data[20:20 + int.from_bytes(data[12:16], "little")]
+        tree = json.loads(text.decode("utf-8", errors="replace"))  # valid: load_mesh checked it
+        names = [unquote(b["uri"]) for key in ("buffers", "images") for b in tree.get(key, [])
+                 if isinstance(b, dict) and isinstance(b.get("uri"), str) and not b["uri"].startswith("data:")]
+    out = []
+    for name in names:
+        beside = str(PurePosixPath(rel).parent / name.strip().lstrip("/"))
+        if ck.path(root, beside, fld).is_file():
+            out.append(beside)
+    return out
+
+
 def check_closed_outward(ck: FieldChecker, vw: np.ndarray, faces: np.ndarray, fld: str, rel: str):
     """A dielectric bounds a volume of glass: its mesh must be closed (every edge shared by exactly two
     triangles), consistently oriented (the two run their edge in opposite directions) and face outward
