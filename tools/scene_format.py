@@ -121,8 +121,9 @@ def page() -> str:
         "HDRI panoramas: PNG, EXR, HDR, read with OpenImageIO). It is the one seam between Blender and the tracer: "
         "the add-on exports it, the presets write it (`hud-trace export PRESET DIR`), the tracer reads it. Every "
         "file must lie inside the folder (relative paths, no `..`, no links out of it; `--allow-external-files` "
-        "lifts that). Every error names the file and the field (`scene.json: objects[2].emission.luminance: must "
-        "be <= 1e+12, got 5e+12`).",
+        "lifts that), the files a mesh names too (a glTF's buffers and images, an OBJ's material libraries), "
+        "which are part of the scene's hash. Every error names the file and the field (`scene.json: "
+        "objects[2].emission.luminance: must be <= 1e+12, got 5e+12`).",
         "",
         "## Units, axes and orientation",
         "",
