@@ -464,23 +464,31 @@ class Film:
         only, when given)."""
         return self.to_pixels(self.layout_variance_y(group)).reshape(self.height, self.width)
 
+    def _mean_variances(self, group: str | None = None) -> list[tuple[float, str]]:
+        """Per group (``group`` alone where given): the variance, (cd/m^2)^2, of its part of the image's
+        mean luminance and what it is taken from (see :meth:`mean_standard_error_basis`)."""
+        out = []
+        for g, rep in self.groups.items():
+            if group is not None and g != group:
+                continue
+            if rep.pixel_count is not None:
+                var = float(self.layout_variance_y(g).sum()) / self.pixels**2
+                out.append((var, "pixels" if int(np.max(self._live(rep.counts()), initial=0)) >= 2 else "none"))
+                continue
+            r = rep.count
+            if r >= 2:
+                mean = rep.mean_sum / r
+                out.append((max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1), "replicates"))
+            else:
+                out.append((0.0, "none"))
+        return out
+
     def mean_standard_error(self, group: str | None = None) -> float:
         """Standard error (cd/m^2) of the image's mean luminance: from the spread of the replicates' image
         means where replicates cover the whole image, else from the pixels' own variances (the pixels
         of a camera method's image are independent estimates); 0 before two replicates exist. The
         groups' variances add."""
-        var = 0.0
-        for g, rep in self.groups.items():
-            if group is not None and g != group:
-                continue
-            if rep.pixel_count is not None:
-                var += float(self.layout_variance_y(g).sum()) / self.pixels**2
-                continue
-            r = rep.count
-            if r >= 2:
-                mean = rep.mean_sum / r
-                var += max(rep.mean_sq / r - mean * mean, 0.0) / (r - 1)
-        return float(np.sqrt(var))
+        return float(np.sqrt(sum(var for var, _ in self._mean_variances(group))))
 
     def mean_standard_error_basis(self, group: str | None = None) -> str:
         """What :meth:`mean_standard_error` is taken from, for the report: "replicates" (the spread of
@@ -488,17 +496,7 @@ class Film:
         of that pixel; pixels with fewer than two are left out, so that it is a lower bound where some
         are), or "none" (fewer than two replicates or samples: no error bar, the figure reads 0); the
         groups' bases joined by "+" where they differ."""
-        bases = []
-        for g, rep in self.groups.items():
-            if group is not None and g != group:
-                continue
-            if rep.pixel_count is not None:
-                basis = "pixels" if int(np.max(self._live(rep.counts()), initial=0)) >= 2 else "none"
-            else:
-                basis = "replicates" if rep.count >= 2 else "none"
-            if basis not in bases:
-                bases.append(basis)
-        return "+".join(bases) or "none"
+        return "+".join(dict.fromkeys(basis for _, basis in self._mean_variances(group))) or "none"
 
     def component_totals(self, name: str) -> tuple[float, float]:
         """One component's luminance, cd/m^2, and that luminance's variance, (cd/m^2)^2, each summed over

@@ -25,8 +25,9 @@ import numpy as np
 
 from ..core.film import Film, Splats, batch_arrays
 from ..core.kept import KeptResults
-from ..core.sampling import make_rng
+from ..core.sampling import TriangleSet, cosine_hemisphere, frame_from_normal, make_rng, to_world
 from ..core.units import luminance
+from ..core.vec import dot, norm, take
 from ..scene.methods import MAX_DEPTH
 from ..transport.path import CUT_KEY, PROBE_DEPTH, PROBE_KEY, STILL_KEY, Context, Roulette, Timers
 from ..transport.world import World
@@ -76,48 +77,33 @@ NO_LIGHT_SOURCE = "the scene has no light source"
 FACING_RAYS = 256
 
 
-def _faces(o) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """An object's triangles (f, 3, 3) mm, their front normals (f, 3) (where the vertices run
-    counter-clockwise) and areas (f,) mm^2."""
-    t = o.triangles
-    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    area = np.linalg.norm(cross, axis=1)
-    return t, cross / np.maximum(area, 1e-300)[:, None], area
-
-
 def _side_sees(world, o, side: float) -> bool:
     """Whether side ``side`` (+1 the front, -1 the back) of emitter ``o`` sees anything that could pass
     its light on: the eye, unoccluded, in front of one of its faces (direct view), or, of
     :data:`FACING_RAYS` rays from points on its faces (by area) cosine-distributed about that side's
     normal (seed 0), one that hits a surface of another object whose material does not absorb
     everything."""
-    from ..core.sampling import cosine_hemisphere, frame_from_normal, to_world, uniform_triangle
-
-    t, normal, area = _faces(o)
-    if not area.sum() > 0:
+    tris = TriangleSet(o.triangles)
+    if not tris.area.sum() > 0:
         return False
-    normal = side * normal
-    centre = t.mean(axis=1)
-    eye = np.asarray(world.eye.position, dtype=np.float64)
-    to_eye = eye - centre
-    facing = np.einsum("ij,ij->i", to_eye, normal) > 0
+    normal = side * tris.normal
+    centre = tris.v0 + (tris.e1 + tris.e2) / 3
+    to_eye = np.asarray(world.eye.position, dtype=np.float64)[:, None] - centre
+    facing = dot(to_eye, normal) > 0
     if facing.any():
         if world.accel is None:
             return True
-        d = to_eye[facing].T
-        dist = np.linalg.norm(d, axis=0)
-        d = d / dist
-        o_ = world.accel.spawn(centre[facing].T, normal[facing].T, d)
+        dist = norm(to_eye[:, facing])
+        d = to_eye[:, facing] / dist
+        o_ = world.accel.spawn(centre[:, facing], normal[:, facing], d)
         if not world.accel.occluded(o_, d.astype(np.float32), dist * (1 - 1e-9)).all():
             return True
     if world.accel is None:
         return False
     rng = make_rng(0)
-    face = rng.choice(len(t), FACING_RAYS, p=area / area.sum())
-    b = uniform_triangle(rng.random((2, FACING_RAYS)))
-    tri = t[face]
-    p = (tri[:, 0] * (1 - b[0] - b[1])[:, None] + tri[:, 1] * b[0][:, None] + tri[:, 2] * b[1][:, None]).T
-    n = normal[face].T
+    face = rng.choice(len(tris), FACING_RAYS, p=tris.area / tris.area.sum())
+    p = tris.point(face, rng.random((2, FACING_RAYS)))
+    n = take(normal, face)
     d = to_world(cosine_hemisphere(rng.random((2, FACING_RAYS))), *frame_from_normal(n))
     f = world.accel.intersect(world.accel.spawn(p, n, d), d.astype(np.float32)).face
     other = (f >= 0) & (world.accel.face_slot[np.maximum(f, 0)] != o.slot)
@@ -132,8 +118,9 @@ def _faces_away(world, o) -> bool:
     if aim is not None and aim.mode == "toward":
         target = world.eye.position if aim.target == "eye" else \
             world.scene.object(aim.target).triangles.reshape(-1, 3).mean(axis=0)
-        t, normal, _ = _faces(o)
-        return bool(np.all(np.einsum("ij,ij->i", np.asarray(target, np.float64) - t.mean(axis=1), normal) <= 0))
+        tris = TriangleSet(o.triangles)
+        centre = tris.v0 + (tris.e1 + tris.e2) / 3
+        return bool(np.all(dot(np.asarray(target, np.float64)[:, None] - centre, tris.normal) <= 0))
     return not _side_sees(world, o, 1.0) and _side_sees(world, o, -1.0)
 
 
@@ -403,7 +390,7 @@ class Integrator:
         result.extra["roulette"] = {"reference_luminance_cd_m2": self.reference_luminance,
                                     "threshold_cd_m2": Roulette(self.reference_luminance).threshold,
                                     "pilot_rays": self.pilot_rays}
-        dark = len(self.world.lights) == 0 and self.world.environment.is_black
+        dark = self.world.dark
         if result.found == 0 and dark:
             result.warnings.append(
                 f"{NO_LIGHT_SOURCE} (no object with an emission block of positive luminance, no lit "
@@ -523,9 +510,9 @@ def drive(local: Integrator, budget: Budget, executor, in_flight: int, progress:
     setup = time.perf_counter() - start  # the pilot, the workers' start-up
 
     workers = getattr(executor, "workers", 1)
-    # A scene without any light source (no emitter, a black environment): its first batch says so, and the
-    # budget would be spent on a black image (Blender's startup scene traced its 10 s)
-    dark = len(local.world.lights) == 0 and local.world.environment.is_black
+    # A scene without any light source: its first batch says so, and the budget would be spent on a black
+    # image (Blender's startup scene traced its 10 s)
+    dark = local.world.dark
 
     def short() -> bool:
         """No batch merged yet: a render holds at least one, however short its budget."""

@@ -74,6 +74,12 @@ class World:
         exact surfaces."""
         return self.scene.scene_hash, repr(self.eye.spec), self.exact_surfaces
 
+    @property
+    def dark(self) -> bool:
+        """Whether the world holds no light source at all: no emitter, a black environment (its image is
+        black whatever is traced)."""
+        return len(self.lights) == 0 and self.environment.is_black
+
     def _polarising_elements(self) -> list[str]:
         """What makes this world need Stokes vectors: objects whose material polarises
         (tracer.optics.bsdf.BSDF.polarising), polarised emitters, the eye's analyser; none with the
