@@ -35,6 +35,7 @@ before the first run began); 5 aborted by a second Ctrl-C (nothing written).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -617,16 +618,12 @@ def cmd_sweep(args) -> int:
                                                      for k in range(len(plan.grid))), key=math.prod))
                 if crowded:
                     print(f"warning: {crowded}", file=sys.stderr)
-                previous = {s: signal.signal(s, flag.handler) for s in STOP_SIGNALS}
-                began = True
-                try:
+                with _signals_to(flag.handler):
+                    began = True
                     result = run_sweep(plan, "optics" if args.optics else args.method, budget, args.seed, outputs,
                                        workers=args.workers, scheduler=args.scheduler,
                                        batch_size=args.batch_size, progress=bar, should_stop=flag, on_run=on_run)
                     written = True  # run_sweep returns once its set is in place
-                finally:
-                    for s, handler in previous.items():
-                        signal.signal(s, handler)
             finally:
                 outputs.close()
     except SweepArgumentError as e:
@@ -826,23 +823,32 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+@contextlib.contextmanager
+def _signals_to(handler, signals=STOP_SIGNALS):
+    """Within the block, ``signals`` go to ``handler`` (a function, or signal.SIG_IGN); the handlers they had
+    come back after it. Outside the main thread (main called by a host program), where no handler can be
+    set, nothing changes."""
+    try:
+        previous = {s: signal.signal(s, handler) for s in signals}
+    except ValueError:
+        previous = {}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
 def _import_holding_interrupts() -> bool:
     """Import the modules the commands need with the stop signals held back; returns whether one came. A
     compiled module (numpy's, OpenImageIO's) turns an interrupt during its initialisation into an
     ImportError with a misleading message, so an interrupt must not land there."""
     came = []
-    try:
-        previous = {s: signal.signal(s, lambda *_: came.append(True)) for s in STOP_SIGNALS}
-    except ValueError:  # not the main thread (main called by a host program): nothing to hold back
-        return False
-    try:
+    with _signals_to(lambda *_: came.append(True)):
         import presets  # noqa: F401
 
         from .products import falsecolour, render  # noqa: F401
         from .scans import eyebox, sweep  # noqa: F401
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
     return bool(came)
 
 
@@ -851,15 +857,6 @@ def _interrupt(signum, frame):
     began" (exit 130, the output folder released) instead of the default death (exit 143, no word, a
     folder made for the outputs left behind)."""
     raise KeyboardInterrupt(signal.Signals(signum).name)
-
-
-def _stop_signals_interrupt() -> dict:
-    """Make SIGTERM and SIGHUP interrupt as Ctrl-C does (:func:`_interrupt`) until a command installs its
-    own handlers; returns the handlers to put back ({} outside the main thread)."""
-    try:
-        return {s: signal.signal(s, _interrupt) for s in STOP_SIGNALS if s != signal.SIGINT}
-    except ValueError:  # not the main thread (main called by a host program)
-        return {}
 
 
 def _sets_committed() -> int:
@@ -874,45 +871,37 @@ def _end_session():
     and its Dask clients, with the stop signals ignored: the command's work is done or given up, and a
     signal that lands in the pool's bounded join (a second Ctrl-C just after the set was written) had
     printed a traceback."""
-    try:
-        held = {s: signal.signal(s, signal.SIG_IGN) for s in STOP_SIGNALS}
-    except ValueError:  # not the main thread
-        held = {}
-    try:
+    with _signals_to(signal.SIG_IGN):
         parallel = sys.modules.get(f"{__package__}.runtime.parallel")
         if parallel is not None:
             parallel.close_shared_pool()
         distributed = sys.modules.get(f"{__package__}.runtime.distributed")
         if distributed is not None:
             distributed.close_clients()
-    finally:
-        for s, handler in held.items():
-            signal.signal(s, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
     started = _command_start()
-    previous = _stop_signals_interrupt()
     written = _sets_committed()
-    try:
-        if _import_holding_interrupts():
-            raise KeyboardInterrupt
-        args = build_parser().parse_args(argv)  # the parser lists the methods: it imports them
-        args.started = started
-        return args.func(args)
-    except (SceneError, ArgumentError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_INPUT
-    except KeyboardInterrupt:  # before a command installs its own handlers, or after it has put them back
-        if _sets_committed() > written:
-            print("interrupted after the outputs were written: the output folder holds them", file=sys.stderr)
-        else:
-            print("interrupted before the work began: nothing written", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    finally:
-        _end_session()
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+    # SIGTERM and SIGHUP interrupt as Ctrl-C does until a command installs its own handlers
+    with _signals_to(_interrupt, tuple(s for s in STOP_SIGNALS if s != signal.SIGINT)):
+        try:
+            if _import_holding_interrupts():
+                raise KeyboardInterrupt
+            args = build_parser().parse_args(argv)  # the parser lists the methods: it imports them
+            args.started = started
+            return args.func(args)
+        except (SceneError, ArgumentError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return EXIT_INPUT
+        except KeyboardInterrupt:  # before a command installs its own handlers, or after it has put them back
+            if _sets_committed() > written:
+                print("interrupted after the outputs were written: the output folder holds them", file=sys.stderr)
+            else:
+                print("interrupted before the work began: nothing written", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        finally:
+            _end_session()
 
 
 if __name__ == "__main__":
