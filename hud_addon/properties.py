@@ -28,7 +28,7 @@ from ..tracer.scene.methods import METHOD_OPTIONS
 from ..tracer.sources.lights import EMISSION
 from ..tracer.sources.sun import SUN_ILLUMINANCE_LX
 from .schema_ui import annotations, starting_values
-from .units import angle_twin, length_twin
+from .units import angle_twin, declared_default, length_twin
 
 
 def _method_items(self, context):
@@ -180,8 +180,7 @@ def _role_changed(self, context):
         return
     before = ROLE_STARTS.get(self.started_role, {})
     for name, value in ROLE_STARTS[self.role].items():
-        prop = self.bl_rna.properties[name]
-        was = before.get(name, tuple(prop.default_array) if prop.is_array else prop.default)
+        was = before[name] if name in before else declared_default(self, name)
         if np.allclose(getattr(self, name), was, rtol=1e-6, atol=1e-7):  # stored as float32
             setattr(self, name, value)
     self.started_role = self.role
@@ -218,13 +217,13 @@ def _object_annotations() -> dict:
     return ann
 
 
-HudSceneSettings = type("HudSceneSettings", (bpy.types.PropertyGroup,), {"__annotations__": _scene_annotations()})
 def _role_starting_value(self, name: str):
     """The value the object's property ``name`` starts from under its role (ROLE_STARTS), or None (the
     property's declared default): what Reset to Default Value puts back (hud_addon.units.starting_value)."""
     return ROLE_STARTS.get(self.role, {}).get(name)
 
 
+HudSceneSettings = type("HudSceneSettings", (bpy.types.PropertyGroup,), {"__annotations__": _scene_annotations()})
 HudObjectSettings = type("HudObjectSettings", (bpy.types.PropertyGroup,),
                          {"__annotations__": _object_annotations(), "starting_value": _role_starting_value})
 

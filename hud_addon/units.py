@@ -30,16 +30,19 @@ def _mm_per_unit() -> float:
     return unit_mm(scene) if scene is not None else M_TO_MM
 
 
+def declared_default(owner, name: str):
+    """The default that ``owner``'s property ``name`` declares (a tuple for an array)."""
+    prop = owner.bl_rna.properties[name]
+    return tuple(prop.default_array) if prop.is_array else prop.default
+
+
 def starting_value(owner, stored: str):
     """The value ``owner``'s property ``stored`` starts from: the owner's own ``starting_value(stored)``
     where it has one and gives one (an object's optical role: a coating's Reflectance is 0.25, where the
     property that every role shares declares the mirror's 0.9), else the property's declared default."""
     own = getattr(owner, "starting_value", None)
     value = own(stored) if own is not None else None
-    if value is None:
-        prop = owner.bl_rna.properties[stored]
-        value = tuple(prop.default_array) if prop.is_array else prop.default
-    return value
+    return declared_default(owner, stored) if value is None else value
 
 
 def _twin(stored: str, size: int, to_shown, from_shown, **kw):

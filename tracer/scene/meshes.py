@@ -48,6 +48,12 @@ _GLTF_TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4
 _READ = Kept(256 << 20)
 
 
+def _glb_json_end(data: bytes) -> int:
+    """Where a GLB's JSON chunk ends: it begins at byte 20, after the 12-byte header and its own 8-byte
+    chunk header, whose first 4 bytes give its length (Khronos glTF 2.0, sec. 4.4)."""
+    return 20 + int.from_bytes(data[12:16], "little")
+
+
 def _reads_other_files(suffix: str, data: bytes) -> bool:
     """Whether trimesh reads files beside the mesh file ``data`` (see :data:`_READ`)."""
     if suffix == ".gltf":
@@ -55,7 +61,7 @@ def _reads_other_files(suffix: str, data: bytes) -> bool:
     if suffix == ".obj":
         return re.search(rb"(?m)^[ \t]*mtllib\b", data) is not None
     if suffix == ".glb" and len(data) >= 20:
-        return _GLTF_FILE_URI.search(data, 20, 20 + int.from_bytes(data[12:16], "little")) is not None
+        return _GLTF_FILE_URI.search(data, 20, _glb_json_end(data)) is not None
     return False
 
 
@@ -435,7 +441,7 @@ def files_beside(ck: FieldChecker, root: Path, rel: str, fld: str) -> list[str]:
     if suffix == ".obj":
         names = [n.decode("utf-8", "replace") for m in _OBJ_MTLLIB.finditer(data) for n in m[1].split()]
     else:
-        text = data if suffix == ".gltf" else data[20:20 + int.from_bytes(data[12:16], "little")]
+        text = data if suffix == ".gltf" else data[20:_glb_json_end(data)]
         tree = json.loads(text.decode("utf-8", errors="replace"))  # valid: load_mesh checked it
         names = [unquote(b["uri"]) for key in ("buffers", "images") for b in tree.get(key, [])
                  if isinstance(b, dict) and isinstance(b.get("uri"), str) and not b["uri"].startswith("data:")]
